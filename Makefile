@@ -1,0 +1,27 @@
+# Two commands do all their own set-up on a fresh clone:
+#   make demo   creates .venv, installs the package, runs the main demo, writes an .rrd
+#   make test   creates .venv, installs the package with its test extras, runs pytest on ti.cpu
+PYTHON ?= python3
+VENV := .venv
+PY := $(VENV)/bin/python
+OUT ?= out
+
+.PHONY: demo test bench clean
+
+$(VENV)/.installed: pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -e '.[test]'
+	touch $@
+
+demo: $(VENV)/.installed
+	$(PY) demos/hanging_cloth.py --out $(OUT)
+
+test: $(VENV)/.installed
+	$(PY) -m pytest
+
+bench: $(VENV)/.installed
+	$(PY) -m taichi_cloth bench --out $(OUT)/bench
+
+clean:
+	rm -rf $(VENV) $(OUT) .pytest_cache *.egg-info
