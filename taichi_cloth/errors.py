@@ -1,0 +1,29 @@
+"""Errors the engine raises on purpose. Each carries one message meant for a user, never a traceback."""
+
+
+class TaichiClothError(Exception):
+    """Base class of every error the engine raises for bad input or a failed run."""
+
+
+class SceneError(TaichiClothError, ValueError):
+    """A scene (file or dict) is malformed: the message names the file, the table and the key."""
+
+
+class MeshError(TaichiClothError, ValueError):
+    """A mesh is unusable (empty, non-manifold, NaN vertices, degenerate faces): the message names the file."""
+
+
+class BlowUpError(TaichiClothError, RuntimeError):
+    """A run went unstable (NaN, runaway speed or strain) and was stopped.
+
+    Attributes: integrator (name), step (index of the step that was checked), dt (s),
+    suggested_dt (s, or None), reason (what was seen).
+    """
+
+    def __init__(self, message: str, *, integrator: str, step: int, dt: float, suggested_dt, reason: str):
+        super().__init__(message)
+        self.integrator = integrator
+        self.step = step
+        self.dt = dt
+        self.suggested_dt = suggested_dt
+        self.reason = reason

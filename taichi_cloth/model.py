@@ -1,0 +1,225 @@
+"""Model (static particle and spring fields) and State (positions and velocities).
+
+Fields are allocated once at a capacity and carry a live count, so a later refinement can refill
+them in place without recompiling a kernel. Kernels loop to the live counts n_particles[None] and
+n_springs[None].
+"""
+from __future__ import annotations
+
+import numpy as np
+import taichi as ti
+
+from .builder import ClothData, SpringKind
+from .runtime import ensure_initialized
+
+_PRECISIONS = {"f32": ti.f32, "f64": ti.f64}
+
+
+def csr(owner: np.ndarray, n_owners: int, *payloads: np.ndarray):
+    """Group `payloads` by `owner` (stable): returns offsets (n_owners+1,) and the regrouped payloads."""
+    order = np.argsort(owner, kind="stable")
+    offsets = np.zeros(n_owners + 1, np.int64)
+    np.cumsum(np.bincount(owner, minlength=n_owners), out=offsets[1:])
+    return (offsets,) + tuple(p[order] for p in payloads)
+
+
+@ti.data_oriented
+class Model:
+    """The static part of a cloth, in Taichi fields (P = particle capacity, S = spring capacity).
+
+    n_particles, n_springs, n_triangles: 0-d i32 fields, the live counts.
+    rest_x:       (P,) vec3 fp [m]     rest/initial positions
+    mass:         (P,) fp [kg]
+    inv_mass:     (P,) fp [1/kg]       0 for a pinned particle
+    spring_a/b:   (S,) i32             endpoint indices
+    rest_length:  (S,) fp [m]
+    stiffness:    (S,) fp [N/m]
+    damping:      (S,) fp [N*s/m]
+    spring_kind:  (S,) i32             SpringKind
+    stiffness_sum:(P,) fp [N/m]        sum of the spring constants at each particle (derived)
+    adj_offset:   (P+1,) i32           CSR: the incidences of particle i are adj_offset[i]..adj_offset[i+1]
+    adj_spring:   (2S,) i32            spring of an incidence
+    adj_other:    (2S,) i32            the particle at the other end
+    triangles:    (T,) vec3 i32
+    tri_offset:   (P+1,) i32           CSR of the triangles around each vertex (for vertex normals)
+    tri_list:     (3T,) i32
+
+    `data` keeps the numpy description (ClothData) the fields were filled from; pin flags are
+    mirrored in `pinned` (numpy bool, (P,)).
+    """
+
+    def __init__(self, data: ClothData, precision: str = "f32", capacity: tuple[int, int, int] | None = None):
+        ensure_initialized()
+        if precision not in _PRECISIONS:
+            raise ValueError(f"precision must be 'f32' or 'f64', got {precision!r}")
+        self.precision = precision
+        self.fp = _PRECISIONS[precision]
+        P, S, T = data.n_particles, data.n_springs, len(data.triangles)
+        cp, cs, ct = capacity or (P, S, T)
+        if cp < P or cs < S or ct < T:
+            raise ValueError(f"capacity {capacity} is below the cloth's size {(P, S, T)}")
+        self.capacity = (cp, cs, ct)
+        fp = self.fp
+        self.n_particles = ti.field(ti.i32, ())
+        self.n_springs = ti.field(ti.i32, ())
+        self.n_triangles = ti.field(ti.i32, ())
+        self.rest_x = ti.Vector.field(3, fp, cp)
+        self.mass = ti.field(fp, cp)
+        self.inv_mass = ti.field(fp, cp)
+        self.spring_a = ti.field(ti.i32, max(cs, 1))
+        self.spring_b = ti.field(ti.i32, max(cs, 1))
+        self.rest_length = ti.field(fp, max(cs, 1))
+        self.stiffness = ti.field(fp, max(cs, 1))
+        self.damping = ti.field(fp, max(cs, 1))
+        self.spring_kind = ti.field(ti.i32, max(cs, 1))
+        self.stiffness_sum = ti.field(fp, cp)
+        self.adj_offset = ti.field(ti.i32, cp + 1)
+        self.adj_spring = ti.field(ti.i32, max(2 * cs, 1))
+        self.adj_other = ti.field(ti.i32, max(2 * cs, 1))
+        self.triangles = ti.Vector.field(3, ti.i32, max(ct, 1))
+        self.tri_offset = ti.field(ti.i32, cp + 1)
+        self.tri_list = ti.field(ti.i32, max(3 * ct, 1))
+        self.load(data)
+
+    # ------------------------------------------------------------------ filling (host side, once)
+    def load(self, data: ClothData) -> None:
+        """Refill every field from `data` (must fit the capacity); pins are cleared."""
+        P, S, T = data.n_particles, data.n_springs, len(data.triangles)
+        cp, cs, ct = self.capacity
+        if P > cp or S > cs or T > ct:
+            raise ValueError(f"cloth {(P, S, T)} exceeds the model capacity {self.capacity}")
+        if np.any(data.mass <= 0):
+            raise ValueError("every particle needs a positive mass")
+        self.data = data
+        self.pinned = np.zeros(P, dtype=bool)
+        self.n_particles[None], self.n_springs[None], self.n_triangles[None] = P, S, T
+        npfp = self._npfp
+        _fill(self.rest_x, data.positions.astype(npfp))
+        _fill(self.mass, data.mass.astype(npfp))
+        _fill(self.inv_mass, (1.0 / data.mass).astype(npfp))
+        a, b = data.springs[:, 0], data.springs[:, 1]
+        _fill(self.spring_a, a.astype(np.int32))
+        _fill(self.spring_b, b.astype(np.int32))
+        _fill(self.rest_length, data.rest_length.astype(npfp))
+        _fill(self.stiffness, data.stiffness.astype(npfp))
+        _fill(self.damping, data.damping.astype(npfp))
+        _fill(self.spring_kind, data.kind.astype(np.int32))
+        _fill(self.stiffness_sum, self.stiffness_sum_np().astype(npfp))
+        sid = np.arange(S)
+        offsets, adj_spring, adj_other = csr(np.concatenate([a, b]), P, np.concatenate([sid, sid]),
+                                             np.concatenate([b, a]))
+        _fill(self.adj_offset, offsets.astype(np.int32))
+        _fill(self.adj_spring, adj_spring.astype(np.int32))
+        _fill(self.adj_other, adj_other.astype(np.int32))
+        tri = data.triangles.astype(np.int32)
+        _fill(self.triangles, tri)
+        toff, tlist = csr(tri.reshape(-1).astype(np.int64), P, np.repeat(np.arange(T), 3))
+        _fill(self.tri_offset, toff.astype(np.int32))
+        _fill(self.tri_list, tlist.astype(np.int32))
+
+    def pin(self, indices) -> None:
+        """Make particles immovable (inverse mass 0). Their mass still counts for energy and weight."""
+        idx = np.unique(np.asarray(indices, dtype=np.int64))
+        if len(idx) and (idx.min() < 0 or idx.max() >= self.data.n_particles):
+            raise ValueError(f"pin index out of range 0..{self.data.n_particles - 1}")
+        self.pinned[idx] = True
+        inv = np.where(self.pinned, 0.0, 1.0 / self.data.mass)
+        _fill(self.inv_mass, inv.astype(self._npfp))
+
+    def set_stiffness(self, stiffness) -> None:
+        """Replace the spring constants [N/m] (scalar or (S,)); kernels read the field, nothing recompiles.
+        The damping coefficients keep their ratio kd/k."""
+        k_old = self.data.stiffness
+        k = np.broadcast_to(np.asarray(stiffness, dtype=np.float64), k_old.shape).copy()
+        ratio = np.divide(self.data.damping, k_old, out=np.zeros_like(k_old), where=k_old > 0)
+        self.data.stiffness, self.data.damping = k, ratio * k
+        _fill(self.stiffness, k.astype(self._npfp))
+        _fill(self.stiffness_sum, self.stiffness_sum_np().astype(self._npfp))
+        _fill(self.damping, self.data.damping.astype(self._npfp))
+
+    def set_mass(self, mass) -> None:
+        """Replace the particle masses [kg] (scalar or (P,)); pins are kept."""
+        m = np.broadcast_to(np.asarray(mass, dtype=np.float64), (self.data.n_particles,)).copy()
+        if np.any(m <= 0):
+            raise ValueError("every particle needs a positive mass")
+        self.data.mass = m
+        _fill(self.mass, m.astype(self._npfp))
+        _fill(self.inv_mass, np.where(self.pinned, 0.0, 1.0 / m).astype(self._npfp))
+
+    @property
+    def _npfp(self):
+        return np.float32 if self.precision == "f32" else np.float64
+
+    # ------------------------------------------------------------------ host-side derived quantities
+    @property
+    def total_mass(self) -> float:
+        return float(self.data.mass.sum())
+
+    def stiffness_sum_np(self) -> np.ndarray:
+        """(P,) sum of the spring constants at each particle [N/m]."""
+        d = self.data
+        return np.bincount(d.springs.reshape(-1), np.repeat(d.stiffness, 2), minlength=d.n_particles)
+
+    def omega_max_bound(self) -> float:
+        """Gershgorin upper bound [rad/s] on the highest linear frequency: sqrt(max_i 2 sum_j k_ij / m_i)
+        over free particles (ALGORITHMS.md 1.4). 0 if every particle is pinned."""
+        free = ~self.pinned
+        if not free.any():
+            return 0.0
+        return float(np.sqrt(np.max(2.0 * self.stiffness_sum_np()[free] / self.data.mass[free])))
+
+    def damping_ratio_max(self) -> float:
+        """max over springs of kd/k [s] (stiffness-proportional damping)."""
+        k, kd = self.data.stiffness, self.data.damping
+        r = np.divide(kd, k, out=np.zeros_like(k), where=k > 0)
+        return float(r.max()) if len(r) else 0.0
+
+
+def _fill(f, values: np.ndarray) -> None:
+    """Write `values` into the first len(values) entries of field `f` (fields are capacity-sized)."""
+    n = len(values)
+    if n == 0:
+        return
+    if n == f.shape[0]:
+        f.from_numpy(values)
+    else:
+        buf = f.to_numpy()
+        buf[:n] = values
+        f.from_numpy(buf)
+
+
+@ti.data_oriented
+class State:
+    """The moving part of a cloth.
+
+    x: (P,) vec3 fp [m]    positions
+    v: (P,) vec3 fp [m/s]  velocities
+    t: float [s]           simulated time (host side)
+    """
+
+    def __init__(self, model: Model):
+        self.model = model
+        self.x = ti.Vector.field(3, model.fp, model.capacity[0])
+        self.v = ti.Vector.field(3, model.fp, model.capacity[0])
+        self.t = 0.0
+        self.reset()
+
+    def reset(self) -> None:
+        """Back to the rest positions, zero velocity, t = 0."""
+        self.x.copy_from(self.model.rest_x)
+        self.v.fill(0)
+        self.t = 0.0
+
+    def positions(self) -> np.ndarray:
+        """(P,3) float64 copy of the live positions [m]."""
+        return self.x.to_numpy()[: self.model.data.n_particles].astype(np.float64)
+
+    def velocities(self) -> np.ndarray:
+        """(P,3) float64 copy of the live velocities [m/s]."""
+        return self.v.to_numpy()[: self.model.data.n_particles].astype(np.float64)
+
+    def set(self, x=None, v=None) -> None:
+        """Overwrite positions [m] and/or velocities [m/s] ((P,3) arrays)."""
+        for f, val in ((self.x, x), (self.v, v)):
+            if val is not None:
+                _fill(f, np.asarray(val, dtype=self.model._npfp))
