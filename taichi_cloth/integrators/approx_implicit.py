@@ -1,0 +1,102 @@
+"""The approximate implicit step of seed 000 eq. (2) (Kang, Choi, Cho, Lee 2001).
+
+Linearised backward Euler (M - h^2 J) dv = h f with the spring Jacobian replaced by the isotropic
+"linear spring" matrix J~ (J~_ii = -sum_j k_ij I, J~_ij = k_ij I), solved by Jacobi sweeps:
+
+    dv_i <- ( h f_i + h^2 sum_j k_ij dv_j ) / ( m_i + h^2 sum_j k_ij )
+
+Seed form (the default, exactly as published): two sweeps from dv = 0 and no h J~ v term, i.e.
+    dv~_j = h f_j / (m_j + h^2 k n_j),  dv_i = (h f_i + h^2 k sum_j dv~_j) / (m_i + h^2 k n_i),
+with per-spring k_ij in place of the single k (ALGORITHMS.md 1.1). Then v += dv, x += h v.
+
+Its known weakness: it damps low-frequency motion. A uniform fall gets dv = h g (1 - r^2),
+r = h^2 K / (m + h^2 K), so a stiff free-falling sheet falls at a fraction of g; statics stay right
+(dv = 0 iff f = 0). Variants (ALGORITHMS.md 1.1b), as options:
+  warm_start: start the sweeps from the previous step's dv (a uniform fall then converges to dv = h g,
+              at the rate r^2 per step). Measured: it is linearly UNSTABLE on spring modes (modal analysis of
+              the two-sweep map: spectral radius 1.08 at r = 0.5, 1.22 at r = 0.9) and blew up on every hanging
+              cloth we tried, with or without jv_term; offered to study the free-fall bias, not for drapes;
+  jv_term:    add h^2 sum_j k_ij (v_j - v_i) (the h J~ v term) to the right-hand side, which is what
+              makes more than two sweeps safe (without it, more sweeps blew up in our tests);
+  sweeps:     the number of Jacobi sweeps (the seed uses 2).
+Pinned particles have dv = 0 in the solve.
+"""
+
+import warnings
+
+import taichi as ti
+
+from .base import Integrator, Option, at_least_one
+
+
+@ti.data_oriented
+class ApproxImplicit(Integrator):
+    name = "approx-implicit"
+    unconditionally_stable = True
+    OPTIONS = {
+        "sweeps": Option(int, 2, "Jacobi sweeps per step (seed: 2)", at_least_one),
+        "warm_start": Option(bool, False, "start the sweeps from the previous step's dv instead of 0"),
+        "jv_term": Option(bool, False, "include the h J~ v term in the right-hand side (needed for sweeps > 2)"),
+    }
+
+    def __init__(self, model, state, forces, **options):
+        super().__init__(model, state, forces, **options)
+        if self.options["warm_start"]:
+            warnings.warn("approx-implicit warm_start is linearly unstable on spring modes (spectral radius up to "
+                          "~1.2 per step); expect a blow-up on stiff cloth", stacklevel=2)
+        if self.options["sweeps"] > 2 and not self.options["jv_term"]:
+            warnings.warn("approx-implicit with more than 2 sweeps and no jv_term is known to go unstable "
+                          "on cloth (ALGORITHMS.md 1.1, surprise 2); set jv_term = true", stacklevel=2)
+        P = model.capacity[0]
+        self.rhs = ti.Vector.field(3, model.fp, P)      # h f (+ h^2 J~ v) [kg m/s]
+        self.inv_diag = ti.field(model.fp, P)           # 1 / (m + h^2 sum k) [1/kg]
+        self.dv = ti.Vector.field(3, model.fp, (2, P))  # ping-pong Jacobi iterates [m/s]; row 0 keeps the last dv
+        # sweeps and warm start are fixed per integrator: the sweeps unroll into one kernel (one launch per step)
+        self.warm = bool(self.options["warm_start"])
+        self.extra_sweeps = self.options["sweeps"] - (0 if self.warm else 1)
+        self.reset()
+
+    def reset(self) -> None:
+        self.dv.fill(0)
+
+    def step(self, dt: float) -> None:
+        self.forces.prepare(self.state.t)
+        self._step(dt)
+        self.state.t += dt
+
+    @ti.kernel
+    def _step(self, dt: ti.f64):
+        m, s, fm = self.model, self.state, self.forces
+        h = ti.cast(dt, m.fp)
+        for i in range(m.n_particles[None]):
+            if m.inv_mass[i] == 0:
+                self.rhs[i] = ti.Vector.zero(m.fp, 3)
+                self.dv[0, i] = ti.Vector.zero(m.fp, 3)
+                self.dv[1, i] = ti.Vector.zero(m.fp, 3)
+            else:
+                f = fm.particle_force(i, True)
+                jv = ti.Vector.zero(m.fp, 3)
+                if ti.static(self.options["jv_term"]):
+                    for e in range(m.adj_offset[i], m.adj_offset[i + 1]):
+                        jv += m.stiffness[m.adj_spring[e]] * (s.v[m.adj_other[e]] - s.v[i])
+                rhs = h * f + h * h * jv
+                inv_diag = 1.0 / (m.mass[i] + h * h * m.stiffness_sum[i])
+                self.rhs[i] = rhs
+                self.inv_diag[i] = inv_diag
+                if ti.static(not self.warm):
+                    self.dv[0, i] = rhs * inv_diag  # sweep 1 from dv = 0
+        for k in ti.static(range(self.extra_sweeps)):
+            for i in range(m.n_particles[None]):
+                if m.inv_mass[i] != 0:
+                    acc = ti.Vector.zero(m.fp, 3)
+                    for e in range(m.adj_offset[i], m.adj_offset[i + 1]):
+                        acc += m.stiffness[m.adj_spring[e]] * self.dv[k % 2, m.adj_other[e]]
+                    self.dv[(k + 1) % 2, i] = (self.rhs[i] + h * h * acc) * self.inv_diag[i]
+        last = ti.static(self.extra_sweeps % 2)
+        for i in range(m.n_particles[None]):
+            if m.inv_mass[i] != 0:
+                dv = self.dv[last, i]
+                if ti.static(last == 1):
+                    self.dv[0, i] = dv  # keep the last dv in row 0 for a warm start
+                s.v[i] += dv
+                s.x[i] += h * s.v[i]

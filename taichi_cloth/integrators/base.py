@@ -1,0 +1,75 @@
+"""The one small contract every integrator honours: `step(dt)` advances state by dt seconds."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Callable, ClassVar
+
+
+@dataclass(frozen=True)
+class Option:
+    """An integrator option as the scene file and the Python API see it."""
+
+    type: type
+    default: Any
+    doc: str
+    check: Callable[[Any], str | None] = lambda v: None  # returns an error text or None
+
+
+def positive(v):
+    return None if v > 0 else "must be > 0"
+
+
+def at_least_one(v):
+    return None if v >= 1 else "must be >= 1"
+
+
+class Integrator:
+    """Base class. Subclasses set `name`, `OPTIONS`, `unconditionally_stable` and implement `step`.
+
+    An explicit integrator also implements `is_stable(h, omega, gamma, beta)`: the closed-form linear
+    stability condition for a mode of frequency omega [rad/s] with air drag rate gamma [1/s] and
+    stiffness-proportional spring damping beta [s] (ALGORITHMS.md 1.4).
+    """
+
+    name: ClassVar[str] = ""
+    OPTIONS: ClassVar[dict[str, Option]] = {}
+    unconditionally_stable: ClassVar[bool] = False
+    #: True when positions alone carry the motion (velocity derived from history): Verlet, central difference
+    position_based: ClassVar[bool] = False
+
+    def __init__(self, model, state, forces, **options):
+        self.model, self.state, self.forces = model, state, forces
+        unknown = set(options) - set(self.OPTIONS)
+        if unknown:
+            raise ValueError(f"integrator {self.name!r} has no option {sorted(unknown)[0]!r}"
+                             f" (options: {', '.join(self.OPTIONS) or 'none'})")
+        self.options = {k: opt.default for k, opt in self.OPTIONS.items()}
+        for k, v in options.items():
+            problem = self.OPTIONS[k].check(v)
+            if problem:
+                raise ValueError(f"integrator {self.name!r} option {k!r} {problem} (got {v!r})")
+            self.options[k] = v
+        #: cumulative counters worth reporting (e.g. CG iterations); a run reports their mean per step
+        self.stats: dict[str, float] = {}
+
+    def step(self, dt: float) -> None:
+        raise NotImplementedError
+
+    def reset(self) -> None:
+        """Forget any history (called when the state is reset or overwritten)."""
+
+    @classmethod
+    def is_stable(cls, h: float, omega: float, gamma: float, beta: float) -> bool:
+        return True
+
+    @classmethod
+    def max_stable_dt(cls, omega: float, gamma: float, beta: float) -> float | None:
+        """Largest h [s] with is_stable(h, ...) for a mode of frequency omega (bisection on the closed form);
+        None for an unconditionally stable integrator or omega = 0."""
+        if cls.unconditionally_stable or omega <= 0:
+            return None
+        lo, hi = 0.0, 4.0 / omega
+        for _ in range(80):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if cls.is_stable(mid, omega, gamma, beta) else (lo, mid)
+        return lo

@@ -1,0 +1,70 @@
+"""Position Verlet with the damping of seed 002:  x+ = (2 - c) x - (1 - c) x- + a h^2.
+
+c is the per-step damping factor; we set c = 1 - exp(-gamma h) from the air drag rate gamma [1/s]
+so the drag does not depend on the step (ALGORITHMS.md 1.4).
+
+Implemented in displacement form: with d = x - x- (= h v), the update is d+ = (1 - c) d + a h^2,
+x+ = x + d+, which is the same recursion but keeps float32 precision when h is small (the position
+form loses a h^2 below the rounding of x). Velocities v = d / h feed spring damping, wind and energy.
+Start-up: x- = x0 - h v0 + h^2 a0 / 2, which makes a constant acceleration exact.
+"""
+import math
+
+import taichi as ti
+
+from .base import Integrator
+
+
+@ti.data_oriented
+class HistoryIntegrator(Integrator):
+    """The two-level position schemes (Verlet, central difference): the history x - x- is h v."""
+
+    position_based = True
+
+    def __init__(self, model, state, forces, **options):
+        super().__init__(model, state, forces, **options)
+        self._started = False
+
+    def reset(self) -> None:
+        self._started = False
+
+    def step(self, dt: float) -> None:
+        self.forces.prepare(self.state.t)
+        self._step(dt, self._damping_factor(dt), int(not self._started))
+        self._started = True
+        self.state.t += dt
+
+    def _damping_factor(self, dt: float) -> float:
+        raise NotImplementedError
+
+
+@ti.data_oriented
+class Verlet(HistoryIntegrator):
+    name = "verlet"
+
+    def _damping_factor(self, dt: float) -> float:
+        return 1.0 - math.exp(-self.forces.air_damping_value * dt)
+
+    @ti.kernel
+    def _step(self, dt: ti.f64, c_: ti.f64, first: ti.i32):
+        m, s, fm = self.model, self.state, self.forces
+        h = ti.cast(dt, m.fp)
+        c = ti.cast(c_, m.fp)
+        for i in range(m.n_particles[None]):
+            fm.f[i] = fm.particle_force(i, False)
+        for i in range(m.n_particles[None]):
+            if m.inv_mass[i] != 0:
+                a = m.inv_mass[i] * fm.f[i]
+                d = h * s.v[i]
+                if first:
+                    d -= 0.5 * h * h * a  # x0 - x(-h) from the Taylor start-up
+                d = (1.0 - c) * d + a * h * h
+                s.v[i] = d / h
+                s.x[i] += d
+
+    @classmethod
+    def is_stable(cls, h, omega, gamma, beta):
+        # modal recursion x+ = (2 - a - h^2 w^2) x - (1 - a) x-, a = c + h beta w^2 (lagged spring damping):
+        # stable iff h^2 w^2 < 4 - 2a (ALGORITHMS.md 1.4 with c_d -> a)
+        a = 1.0 - math.exp(-gamma * h) + h * beta * omega * omega
+        return h * h * omega * omega < 4.0 - 2.0 * a

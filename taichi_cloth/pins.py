@@ -1,0 +1,114 @@
+"""Pins (seed 000 "fixed points"): particles held in place, or moved along a scripted path.
+
+Selection is a predicate on rest positions (indices, nearest-to-points, or a box), so it can be
+re-applied to a refined mesh. A fixed pin is just inverse mass 0 and costs nothing per step; only a
+scene with a moving pin builds the PinDriver and compiles its kernel.
+"""
+
+from dataclasses import dataclass
+from typing import Callable, Sequence
+
+import numpy as np
+import taichi as ti
+
+
+class KeyframePath:
+    """Piecewise-linear offset [m] through keyframes (t [s], dx, dy, dz); held constant outside them."""
+
+    def __init__(self, keyframes):
+        k = np.asarray(keyframes, dtype=np.float64)
+        if k.ndim != 2 or k.shape[1] != 4 or len(k) == 0:
+            raise ValueError("keyframes must be a list of [t, dx, dy, dz] rows")
+        if np.any(np.diff(k[:, 0]) <= 0):
+            raise ValueError("keyframe times must increase strictly")
+        self.t, self.offsets = k[:, 0], k[:, 1:]
+
+    def __call__(self, t: float) -> np.ndarray:
+        return np.array([np.interp(t, self.t, self.offsets[:, c]) for c in range(3)])
+
+
+@dataclass
+class PinSpec:
+    """A group of pinned particles.
+
+    indices: particle indices;
+    near:    points [m]; each pins the particle whose rest position is nearest to it;
+    box:     ((xmin, ymin, zmin), (xmax, ymax, zmax)) [m]; pins every particle whose rest position is inside;
+    path:    None (fixed), keyframes [[t, dx, dy, dz], ...] or any callable t [s] -> offset (3,) [m].
+    """
+
+    indices: Sequence[int] = ()
+    near: Sequence[Sequence[float]] = ()
+    box: tuple | None = None
+    path: Callable[[float], np.ndarray] | Sequence | None = None
+
+    def __post_init__(self):
+        if self.path is not None and not callable(self.path):
+            self.path = KeyframePath(self.path)
+
+    def select(self, rest_positions: np.ndarray) -> np.ndarray:
+        """Indices (sorted, unique) of the particles this spec pins."""
+        P = len(rest_positions)
+        chosen = [np.asarray(self.indices, dtype=np.int64).reshape(-1)]
+        if len(chosen[0]) and (chosen[0].min() < 0 or chosen[0].max() >= P):
+            raise ValueError(f"pin indices must lie in 0..{P - 1}")
+        if len(self.near):
+            pts = np.asarray(self.near, dtype=np.float64).reshape(-1, 3)
+            d2 = ((rest_positions[None, :, :] - pts[:, None, :]) ** 2).sum(-1)
+            chosen.append(np.argmin(d2, axis=1))
+        if self.box is not None:
+            lo, hi = (np.asarray(b, dtype=np.float64) for b in self.box)
+            inside = np.all((rest_positions >= lo) & (rest_positions <= hi), axis=1)
+            if not inside.any():
+                raise ValueError(f"pin box {lo.tolist()}..{hi.tolist()} contains no particle")
+            chosen.append(np.nonzero(inside)[0])
+        idx = np.unique(np.concatenate(chosen))
+        if len(idx) == 0:
+            raise ValueError("a pin selects no particle (give indices, near or box)")
+        return idx
+
+
+@ti.data_oriented
+class PinDriver:
+    """Moves the particles of the pin groups that have a path. Built only when one does.
+
+    pin_index (N,) i32, pin_origin (N,) vec3 [m], pin_group (N,) i32; group_offset / group_velocity (G,) vec3.
+    """
+
+    def __init__(self, model, state, groups: list[tuple[np.ndarray, Callable]]):
+        self.model, self.state = model, state
+        self.paths = [path for _, path in groups]
+        idx = np.concatenate([g for g, _ in groups]).astype(np.int32)
+        grp = np.concatenate([np.full(len(g), k, np.int32) for k, (g, _) in enumerate(groups)])
+        N, G = len(idx), len(groups)
+        self.n = N
+        self.pin_index = ti.field(ti.i32, N)
+        self.pin_group = ti.field(ti.i32, N)
+        self.pin_origin = ti.Vector.field(3, model.fp, N)
+        self.group_offset = ti.Vector.field(3, model.fp, G)
+        self.group_velocity = ti.Vector.field(3, model.fp, G)
+        self.pin_index.from_numpy(idx)
+        self.pin_group.from_numpy(grp)
+        self.pin_origin.from_numpy(model.data.positions[idx].astype(model._npfp))
+
+    def apply(self, t: float, dt: float | None) -> None:
+        """Place the moving pins at their offset for time t [s]; their velocity is the path's finite
+        difference over the last step dt [s] (zero when dt is None)."""
+        for g, path in enumerate(self.paths):
+            off = np.asarray(path(t), dtype=np.float64)
+            vel = (off - np.asarray(path(t - dt), dtype=np.float64)) / dt if dt else np.zeros(3)
+            self.group_offset[g] = off.tolist()
+            self.group_velocity[g] = vel.tolist()
+        self._place()
+
+    @ti.kernel
+    def _place(self):
+        for p in range(self.n):
+            i = self.pin_index[p]
+            g = self.pin_group[p]
+            self.state.x[i] = self.pin_origin[p] + self.group_offset[g]
+            self.state.v[i] = self.group_velocity[g]
+
+    def positions(self) -> np.ndarray:
+        """(N,3) current positions of the moving pins [m]."""
+        return self.state.positions()[self.pin_index.to_numpy()]
