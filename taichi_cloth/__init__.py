@@ -1,0 +1,35 @@
+"""taichi-cloth: mass-spring cloth on Taichi kernels.
+
+Life cycle: ClothBuilder -> ClothData -> Model (fields) -> State -> Integrator.step(dt), composed by a
+Scene (the only time loop), recorded by a Recorder. Units are SI throughout (m, kg, s, N).
+
+    import taichi_cloth as tc
+    tc.init("cpu")
+    scene = tc.load_scene("demos/scenes/hanging_cloth.toml").scene
+    scene.step(100)
+    x = scene.positions()
+"""
+from .builder import ClothBuilder, ClothData, SpringKind
+from .diagnostics import Measurement
+from .errors import BlowUpError, MeshError, SceneError, TaichiClothError
+from .integrators import INTEGRATORS
+from .material import MATERIALS, Material
+from .model import Model, State
+from .pins import PinSpec
+from .recorder import Recorder
+from .runtime import CompileCounter, init
+from .scene import RunSummary, Scene
+
+__version__ = "0.1.0"
+
+
+def load_scene(source, **overrides):
+    """Parse a scene file (path) or dict into a LoadedScene (.scene, .frames, .output ...); see scenefile."""
+    from .scenefile import load_scene as _load
+
+    return _load(source, **overrides)
+
+
+__all__ = ["BlowUpError", "ClothBuilder", "ClothData", "CompileCounter", "INTEGRATORS", "MATERIALS", "Material",
+           "Measurement", "MeshError", "Model", "PinSpec", "Recorder", "RunSummary", "Scene", "SceneError",
+           "SpringKind", "State", "TaichiClothError", "init", "load_scene"]

@@ -1,0 +1,158 @@
+"""`python -m taichi_cloth bench`: ms per step of every integrator on square grids, compile time, and wall
+time per simulated second of a hanging cloth at each integrator's largest stable step.
+
+"Largest stable step": 0.9 x the linear-theory bound for the explicit family (ALGORITHMS.md 1.4);
+1/60 s (one step per displayed frame) for the unconditionally stable ones. Times are wall clock after a
+warm-up; the real-time factor is simulated seconds per wall second. Results: a table on stdout, plus
+bench.csv, bench.md and bench.png in --out. Never asserted in tests: speed is measured, not tested.
+"""
+from __future__ import annotations
+
+import csv
+import time
+from pathlib import Path
+
+FRAME_DT = 1.0 / 60.0
+
+
+def add_bench_arguments(p) -> None:
+    p.add_argument("--sizes", type=int, nargs="+", default=[32, 64, 128, 256], help="grid sizes n (n x n particles)")
+    p.add_argument("--integrators", nargs="+", default=None, help="integrators to time (default: all five)")
+    p.add_argument("--steps", type=int, default=20, help="steps per timed block (5 blocks, median reported)")
+    p.add_argument("--material", default="cotton", help="material preset")
+    p.add_argument("--arch", default="cpu", choices=("cpu", "gpu"))
+    p.add_argument("--out", default="out/bench", help="folder for bench.csv, bench.md, bench.png")
+
+
+def hanging_cloth(n: int, integrator: str, material: str = "cotton", dt: float | None = None, **options):
+    """The benchmark scene: a 1 m square sheet of n x n particles pinned at its two top corners."""
+    from .builder import ClothBuilder
+    from .integrators import integrator_class
+    from .scene import Scene
+
+    cloth = ClothBuilder.grid((1.0, 1.0), (n, n), material, center=(0.0, 1.0, 0.0), plane="xy")
+    top = [n * (n - 1), n * n - 1]
+    if dt is None:
+        dt = FRAME_DT if integrator_class(integrator).unconditionally_stable else 1.0  # replaced below
+    scene = Scene(cloth, name=f"bench_{integrator}_{n}", integrator=integrator, dt=dt, integrator_options=options,
+                  pins=[{"indices": top}], air_damping=0.2, step_guard="off")
+    if scene.stable_dt is not None and dt == 1.0:
+        scene.dt = 0.9 * scene.stable_dt
+    return scene
+
+
+def time_scene(scene, steps: int, blocks: int = 5) -> dict:
+    """First-step time (compile or cache load), then the median over `blocks` blocks of `steps` steps of the
+    ms per step, after 3 warm-up steps. The median resists the noise of a shared 2-core machine."""
+    import statistics
+
+    import taichi as ti
+
+    from .errors import BlowUpError
+
+    t0 = time.perf_counter()
+    scene._advance(1)
+    ti.sync()
+    first = time.perf_counter() - t0
+    scene._advance(3)
+    ti.sync()
+    per_block = []
+    for _ in range(blocks):
+        t0 = time.perf_counter()
+        scene._advance(steps)
+        ti.sync()
+        per_block.append(1e3 * (time.perf_counter() - t0) / steps)
+    ms = statistics.median(per_block)
+    try:
+        scene.check()
+        stable = True
+    except BlowUpError:
+        stable = False
+    per_sim_s = ms * 1e-3 / scene.dt
+    return {"first_step_s": first, "ms_per_step": ms, "dt": scene.dt, "wall_per_sim_s": per_sim_s,
+            "realtime_factor": 1.0 / per_sim_s, "stable": stable,
+            **{k: v / (blocks * steps + 4) for k, v in scene.integrator.stats.items()}}
+
+
+def time_recorder(scene, out: Path, frames: int = 10) -> float:
+    """ms per recorded frame (positions + normals + scalars) for this scene's cloth."""
+    from .recorder import Recorder
+
+    with Recorder(out / "recorder_timing.rrd") as rec:
+        rec.begin_cloth("cloth", scene)
+        m = scene.measure()
+        rec.log_frame("cloth", scene, 0, m)
+        t0 = time.perf_counter()
+        for f in range(1, frames + 1):
+            rec.log_frame("cloth", scene, f, m)
+        ms = 1e3 * (time.perf_counter() - t0) / frames
+    (out / "recorder_timing.rrd").unlink(missing_ok=True)
+    return ms
+
+
+def run_bench(args) -> int:
+    from . import runtime
+    from .integrators import INTEGRATORS
+
+    runtime.init(args.arch)
+    names = args.integrators or list(INTEGRATORS)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    rows = []
+    for n in args.sizes:
+        record_ms = None
+        for name in names:
+            scene = hanging_cloth(n, name, args.material)
+            r = time_scene(scene, args.steps)
+            if record_ms is None:
+                record_ms = time_recorder(scene, out)
+            rows.append({"integrator": name, "n": n, "particles": n * n, "springs": scene.model.data.n_springs,
+                         **r, "record_ms_per_frame": record_ms})
+            print(_row_text(rows[-1]), flush=True)
+    _write(rows, out, args)
+    return 0
+
+
+COLUMNS = [("integrator", "{}"), ("n", "{}"), ("dt", "{:.3g}"), ("ms_per_step", "{:.3f}"),
+           ("first_step_s", "{:.2f}"), ("wall_per_sim_s", "{:.3g}"), ("realtime_factor", "{:.3g}"),
+           ("cg_iterations", "{:.1f}"), ("record_ms_per_frame", "{:.2f}"), ("stable", "{}")]
+
+
+def _row_text(r: dict) -> str:
+    return " | ".join(fmt.format(r[k]) if k in r else "-" for k, fmt in COLUMNS)
+
+
+def _write(rows: list[dict], out: Path, args) -> None:
+    header = " | ".join(k for k, _ in COLUMNS)
+    table = [f"| {header} |", "|" + "---|" * len(COLUMNS)] + [f"| {_row_text(r)} |" for r in rows]
+    text = "\n".join(table)
+    (out / "bench.md").write_text(text + "\n")
+    keys = sorted({k for r in rows for k in r})
+    with open(out / "bench.csv", "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=keys)
+        w.writeheader()
+        w.writerows(rows)
+    print("\n" + text)
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        print("matplotlib not installed: no plot")
+        return
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
+    for name in dict.fromkeys(r["integrator"] for r in rows):
+        rs = [r for r in rows if r["integrator"] == name]
+        axes[0].loglog([r["particles"] for r in rs], [r["ms_per_step"] for r in rs], "o-", label=name)
+        axes[1].loglog([r["particles"] for r in rs], [r["realtime_factor"] for r in rs], "o-", label=name)
+    axes[0].set(xlabel="particles", ylabel="ms per step", title="cost of one step")
+    axes[1].axhline(1.0, color="k", lw=0.8, ls="--")
+    axes[1].set(xlabel="particles", ylabel="simulated s per wall s",
+                title="hanging cloth at the largest stable step")
+    for ax in axes:
+        ax.grid(True, which="both", alpha=0.3)
+    axes[0].legend()
+    fig.tight_layout()
+    fig.savefig(out / "bench.png", dpi=110)
+    print(f"wrote {out / 'bench.md'}, {out / 'bench.csv'}, {out / 'bench.png'}")

@@ -1,0 +1,125 @@
+"""Command line: `python -m taichi_cloth run|bench|info`. Demo scripts reuse `run_scene_file`."""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from .errors import BlowUpError, MeshError, SceneError
+
+EXIT_BAD_INPUT = 2
+EXIT_BLOWUP = 3
+
+
+def add_run_arguments(p: argparse.ArgumentParser, frames_default=None) -> None:
+    p.add_argument("--out", help="output folder (default: the scene's [output] dir, usually out/)")
+    p.add_argument("--frames", type=int, default=frames_default, help="frames to run (default: the scene's)")
+    p.add_argument("--integrator", help="explicit | verlet | central-difference | approx-implicit | implicit")
+    p.add_argument("--dt", type=float, help="time step [s]")
+    p.add_argument("--arch", default="cpu", choices=("cpu", "gpu"), help="Taichi arch (default cpu)")
+    p.add_argument("--precision", choices=("f32", "f64"), help="field precision (default: the scene's)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def run_scene_file(scene_path, args, recorder=None, entity=None, translation=None, quiet=False):
+    """Load `scene_path` with the CLI overrides in `args`, run it, record it and export the final mesh.
+
+    Returns (summary, loaded scene). With an external `recorder` (several scenes in one recording) the
+    caller owns the recording; otherwise one is written to OUT/NAME.rrd. Raises SceneError/MeshError
+    for bad input and BlowUpError (with .summary) when the run goes unstable; the recording is kept.
+    """
+    from . import runtime
+    from .recorder import Recorder
+    from .scenefile import load_scene, parse_scene
+
+    parse_scene(scene_path)  # bad files fail here, before Taichi starts
+    runtime.init(args.arch)
+    loaded = load_scene(scene_path, frames=args.frames, integrator=args.integrator, dt=args.dt,
+                        precision=getattr(args, "precision", None), out=args.out)
+    scene, out = loaded.scene, Path(loaded.output["dir"])
+    own = recorder is None and loaded.output["record"]
+    rec = Recorder(out / f"{loaded.name}.rrd", recording_name=loaded.name) if own else recorder
+    summary = None
+    try:
+        summary = scene.run(loaded.frames, recorder=rec, entity=entity, translation=translation,
+                            progress=not getattr(args, "no_progress", False),
+                            record_every=loaded.output["record_every"])
+    except BlowUpError as err:
+        summary = getattr(err, "summary", None)
+        raise
+    finally:
+        if summary is not None:
+            if own:
+                summary.outputs.append(str(rec.path))
+            if loaded.output["mesh"]:
+                out.mkdir(parents=True, exist_ok=True)
+                stem = loaded.name if entity is None else entity.replace("/", "_")
+                for suffix in (".obj", ".ply"):
+                    summary.outputs.append(str(scene.export_mesh(out / f"{stem}{suffix}")))
+        if own:
+            rec.close()
+    if not quiet:
+        print(summary.format())
+        if own:
+            print(f"open the recording with:  rerun {rec.path}")
+    return summary, loaded
+
+
+def _cmd_run(args) -> int:
+    try:
+        run_scene_file(args.scene, args)
+    except (SceneError, MeshError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except BlowUpError as exc:
+        summary = getattr(exc, "summary", None)
+        if summary is not None:
+            print(summary.format())
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_BLOWUP
+    return 0
+
+
+def _cmd_info(args) -> int:
+    import numpy
+    import rerun
+    import taichi
+
+    from .integrators import INTEGRATORS
+    from .material import MATERIALS
+
+    print(f"taichi {taichi.__version__}, numpy {numpy.__version__}, rerun-sdk {rerun.__version__}")
+    print("integrators:")
+    for name, cls in INTEGRATORS.items():
+        kind = "unconditionally stable" if cls.unconditionally_stable else "explicit, step-limited"
+        print(f"  {name:20s} {kind}")
+        for opt_name, opt in cls.OPTIONS.items():
+            print(f"      {opt_name} = {opt.default!r}: {opt.doc}")
+    print("materials (density kg/m^2, stretch N/m, shear N/m, bend N m, damping s):")
+    for name, m in MATERIALS.items():
+        print(f"  {name:8s} {m.density:6.3g} {m.stretch:8.4g} {m.shear:8.4g} {m.bend:8.2g} {m.damping:8.2g}")
+    return 0
+
+
+def _cmd_bench(args) -> int:
+    from .bench import run_bench
+
+    return run_bench(args)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m taichi_cloth", description="taichi-cloth: mass-spring cloth on Taichi")
+    sub = parser.add_subparsers(dest="command", required=True)
+    p_run = sub.add_parser("run", help="run a scene file, write OUT/NAME.rrd and the final mesh")
+    p_run.add_argument("scene", help="scene file (.toml)")
+    add_run_arguments(p_run)
+    p_run.set_defaults(func=_cmd_run)
+    p_info = sub.add_parser("info", help="versions, integrators and their options, materials")
+    p_info.set_defaults(func=_cmd_info)
+    p_bench = sub.add_parser("bench", help="ms per step and real-time factor of every integrator")
+    from .bench import add_bench_arguments
+
+    add_bench_arguments(p_bench)
+    p_bench.set_defaults(func=_cmd_bench)
+    args = parser.parse_args(argv)
+    return args.func(args)

@@ -1,0 +1,338 @@
+"""Scene: the only time loop. It holds exactly the components a scene names.
+
+Per step: integrator.step(dt) -> moving pins -> stretch limit. Per frame: a measurement (energy,
+strain, blow-up check) and, when recording, one recorder call. A blow-up stops the run with a
+BlowUpError that names the integrator, the step and a stable step size; what was recorded is kept.
+"""
+from __future__ import annotations
+
+import math
+import time
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import taichi as ti
+
+from .builder import ClothData
+from .diagnostics import Diagnostics, Measurement
+from .errors import BlowUpError, SceneError
+from .forces import ForceModel
+from .integrators import integrator_class
+from .model import Model, State
+from .normals import VertexNormals
+from .pins import PinDriver, PinSpec
+from .stability import stable_dt
+from .stretch_limit import StretchLimit
+from .wind import Wind
+
+STEP_GUARDS = ("warn", "refuse", "off")
+
+
+@dataclass
+class RunSummary:
+    """What a run did. Times in seconds of wall clock unless named sim_."""
+
+    name: str
+    integrator: str
+    dt: float
+    n_particles: int
+    n_springs: int
+    frames: int = 0
+    steps: int = 0
+    sim_time: float = 0.0
+    wall_step: float = 0.0      # stepping and per-frame checks, frames 2.. (frame 1 compiles)
+    timed_steps: int = 0        # steps inside wall_step
+    wall_record: float = 0.0    # recorder calls, frames 2..
+    first_frame_wall: float = 0.0
+    final: Measurement | None = None
+    max_strain_seen: float = 0.0
+    stats: dict = field(default_factory=dict)
+    blowup: str | None = None
+    outputs: list[str] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+
+    @property
+    def steps_per_s(self) -> float:
+        return self.timed_steps / self.wall_step if self.wall_step > 0 else float("nan")
+
+    @property
+    def realtime_factor(self) -> float:
+        """Simulated seconds per wall second of stepping (> 1 is faster than real time)."""
+        return self.timed_steps * self.dt / self.wall_step if self.wall_step > 0 else float("nan")
+
+    def format(self) -> str:
+        lines = [f"scene {self.name!r}: {self.n_particles} particles, {self.n_springs} springs, "
+                 f"integrator {self.integrator}, dt = {self.dt:.3g} s",
+                 f"  ran {self.frames} frames, {self.steps} steps, {self.sim_time:.3f} s simulated"]
+        if self.wall_step > 0:
+            lines.append(f"  speed: {self.steps_per_s:,.0f} steps/s, {1e3 * self.wall_step / max(self.timed_steps, 1):.3f} "
+                         f"ms/step, {self.realtime_factor:.2f}x real time (frames 2..; frame 1 with compiles took "
+                         f"{self.first_frame_wall:.2f} s)")
+            if self.wall_record > 0:
+                lines.append(f"  recording: {1e3 * self.wall_record / max(self.frames - 1, 1):.2f} ms/frame, "
+                             f"{100 * self.wall_record / (self.wall_step + self.wall_record):.1f} % of the loop")
+        if self.final is not None:
+            f = self.final
+            lines.append(f"  energy: kinetic {f.kinetic:.4g} J, potential {f.potential:.4g} J "
+                         f"(elastic {f.elastic:.4g}, gravity {f.gravity:.4g}), total {f.total:.4g} J")
+            lines.append(f"  max strain: {100 * f.max_strain:.2f} % now, {100 * self.max_strain_seen:.2f} % peak; "
+                         f"max speed {f.max_speed:.3g} m/s")
+        for k, v in self.stats.items():
+            lines.append(f"  {k}: {v:.4g}")
+        for w in self.warnings:
+            lines.append(f"  warning: {w}")
+        lines.append(f"  instability: {self.blowup or 'none detected'}")
+        for o in self.outputs:
+            lines.append(f"  wrote {o}")
+        return "\n".join(lines)
+
+
+class Scene:
+    """A cloth, an integrator and only the components named.
+
+    cloth:              ClothData (from ClothBuilder) or a Model
+    integrator:         "explicit" | "verlet" | "central-difference" | "approx-implicit" | "implicit"
+    dt:                 time step [s]
+    integrator_options: dict of the integrator's OPTIONS
+    gravity:            [m/s^2]; air_damping: drag rate [1/s]
+    pins:               PinSpec list (fixed pins cost nothing per step; moving ones build a PinDriver)
+    wind:               None or Wind keyword arguments (velocity [m/s], coefficient, gust, gust_frequency)
+    stretch_limit:      None or StretchLimit keyword arguments (max_strain, iterations)
+    fps:                frames per simulated second for run() and recording; substeps = round(1/(fps dt))
+    step_guard:         what to do when an explicit integrator's dt exceeds its stable bound: warn/refuse/off
+    max_speed [m/s], max_strain [-]: beyond these (or at any NaN) a run is declared blown up
+    """
+
+    def __init__(self, cloth: ClothData | Model, *, name: str = "cloth", integrator: str = "approx-implicit",
+                 dt: float = 1.0 / 240.0, integrator_options: dict | None = None, gravity=(0.0, -9.81, 0.0),
+                 air_damping: float = 0.1, pins=(), wind: dict | None = None, stretch_limit: dict | None = None,
+                 fps: float = 60.0, precision: str = "f32", step_guard: str = "warn",
+                 max_speed: float = 200.0, max_strain: float = 10.0):
+        if not dt > 0 or not math.isfinite(dt):
+            raise SceneError(f"dt must be a positive number of seconds, got {dt}")
+        if not fps > 0:
+            raise SceneError(f"fps must be > 0, got {fps}")
+        if step_guard not in STEP_GUARDS:
+            raise SceneError(f"step_guard must be one of {', '.join(STEP_GUARDS)}, got {step_guard!r}")
+        self.name = name
+        self.model = cloth if isinstance(cloth, Model) else Model(cloth, precision)
+        self.state = State(self.model)
+        self.dt = float(dt)
+        self.fps = float(fps)
+        self.max_speed, self.max_strain = float(max_speed), float(max_strain)
+        self.warnings: list[str] = []
+
+        specs = [p if isinstance(p, PinSpec) else PinSpec(**p) for p in pins]
+        rest = self.model.data.positions
+        groups = [(spec.select(rest), spec.path) for spec in specs]
+        for idx, _ in groups:
+            self.model.pin(idx)
+        moving = [(idx, path) for idx, path in groups if path is not None]
+        self.pins: PinDriver | None = PinDriver(self.model, self.state, moving) if moving else None
+        self.pinned_indices = np.nonzero(self.model.pinned)[0]
+
+        self.wind = Wind(self.model, self.state, **wind) if wind is not None else None
+        self.forces = ForceModel(self.model, self.state, gravity, air_damping, self.wind)
+        self.integrator = integrator_class(integrator)(self.model, self.state, self.forces,
+                                                       **(integrator_options or {}))
+        self.stretch_limit = StretchLimit(self.model, self.state, **stretch_limit) if stretch_limit else None
+        self.diagnostics = Diagnostics(self.model, self.state, self.forces)
+        self._normals: VertexNormals | None = None
+        self.steps_taken = 0
+        self._check_step(step_guard)
+        if self.pins is not None:
+            self.pins.apply(0.0, None)
+
+    # ------------------------------------------------------------------ construction helpers
+    @classmethod
+    def from_file(cls, path, **overrides) -> "Scene":
+        """Build a scene from a TOML scene file; keyword overrides (frames are not a scene property:
+        see scenefile.load_scene) replace the file's integrator, dt, precision."""
+        from .scenefile import load_scene
+
+        return load_scene(path, **overrides).scene
+
+    @property
+    def stable_dt(self) -> float | None:
+        """The linear-theory stable step [s] of this scene's integrator (None if unconditionally stable)."""
+        return stable_dt(type(self.integrator), self.model, self.forces.air_damping_value)
+
+    def _check_step(self, guard: str) -> None:
+        bound = self.stable_dt
+        if bound is None or self.dt <= bound or guard == "off":
+            return
+        msg = (f"dt = {self.dt:.3g} s exceeds the stable step {bound:.3g} s of integrator "
+               f"{self.integrator.name!r} on this cloth (linear theory, ALGORITHMS.md 1.4)")
+        if guard == "refuse":
+            raise SceneError(msg + "; lower dt or pick approx-implicit/implicit")
+        self.warnings.append(msg)
+        warnings.warn(msg, stacklevel=3)
+
+    @property
+    def substeps(self) -> int:
+        """Steps per frame: round(1 / (fps dt)), at least 1."""
+        return max(1, round(1.0 / (self.fps * self.dt)))
+
+    # ------------------------------------------------------------------ stepping
+    def step(self, n: int = 1) -> Measurement:
+        """Advance n steps, then measure and check for a blow-up (raises BlowUpError). Returns the measurement."""
+        self._advance(n)
+        return self.check()
+
+    def _advance(self, n: int) -> None:
+        dt = self.dt
+        for _ in range(n):
+            self.integrator.step(dt)
+            if self.pins is not None:
+                self.pins.apply(self.state.t, dt)
+            if self.stretch_limit is not None:
+                self.stretch_limit.apply(dt)
+            self.steps_taken += 1
+
+    def measure(self) -> Measurement:
+        return self.diagnostics.measure()
+
+    def check(self) -> Measurement:
+        """Measure the state; raise BlowUpError if it has NaNs, runaway speed or runaway strain."""
+        m = self.measure()
+        reason = None
+        if m.nonfinite:
+            reason = f"{m.nonfinite} particles have NaN or infinite coordinates"
+        elif m.max_speed > self.max_speed:
+            reason = f"max speed {m.max_speed:.3g} m/s exceeds {self.max_speed:.3g} m/s"
+        elif m.max_strain > self.max_strain:
+            reason = f"max strain {m.max_strain:.3g} exceeds {self.max_strain:.3g}"
+        if reason:
+            raise self._blowup(reason)
+        return m
+
+    def _blowup(self, reason: str) -> BlowUpError:
+        name = self.integrator.name
+        bound = self.stable_dt
+        if bound is not None:
+            suggested = 0.9 * bound
+            advice = f"suggested stable step dt <= {suggested:.3g} s (linear theory, ALGORITHMS.md 1.4)"
+        else:
+            suggested = self.dt / 4
+            advice = f"suggested: dt = {suggested:.3g} s or more damping"
+            if name == "approx-implicit" and self.integrator.options["sweeps"] > 2 and not self.integrator.options["jv_term"]:
+                advice += "; more than 2 sweeps need jv_term = true"
+        d = self.model.data
+        k_max = float(d.stiffness.max()) if d.n_springs else 0.0
+        msg = (f"blow-up: integrator {name!r} went unstable by step {self.steps_taken} "
+               f"(t = {self.state.t:.4g} s, dt = {self.dt:.3g} s): {reason}. Parameters: k_max = {k_max:.3g} N/m, "
+               f"m_min = {float(d.mass.min()):.3g} kg, air_damping = {self.forces.air_damping_value:.3g} 1/s; {advice}")
+        return BlowUpError(msg, integrator=name, step=self.steps_taken, dt=self.dt, suggested_dt=suggested,
+                           reason=reason)
+
+    def _stats(self) -> dict:
+        """Cumulative counters of the integrator and the constraints (e.g. CG iterations, stretch passes)."""
+        out = dict(self.integrator.stats)
+        if self.stretch_limit is not None:
+            out.update(self.stretch_limit.stats)
+        return out
+
+    def reset(self) -> None:
+        """Back to t = 0: rest positions, zero velocity, integrator history cleared, pins at their start."""
+        self.state.reset()
+        self.integrator.reset()
+        self.steps_taken = 0
+        if self.pins is not None:
+            self.pins.apply(0.0, None)
+
+    # ------------------------------------------------------------------ reading
+    def positions(self) -> np.ndarray:
+        """(P,3) float64 positions [m]."""
+        return self.state.positions()
+
+    def velocities(self) -> np.ndarray:
+        """(P,3) float64 velocities [m/s]."""
+        return self.state.velocities()
+
+    def net_forces(self) -> np.ndarray:
+        """(P,3) total force [N] on each particle now (springs, gravity, drag, wind); zero rows for pins."""
+        f = self.forces.net_forces()
+        f[self.model.pinned] = 0.0
+        return f
+
+    def surface(self) -> tuple[np.ndarray, np.ndarray]:
+        """(P,3) float32 positions [m] and unit vertex normals of the current shape, in one kernel launch
+        (the normal kernel is built on first use)."""
+        if self._normals is None:
+            self._normals = self.wind.normals if self.wind is not None else VertexNormals(self.model, self.state)
+        return self._normals.snapshot()
+
+    def export_mesh(self, path) -> Path:
+        """Write the current cloth surface with meshio (.obj, .ply, .vtk... by suffix)."""
+        import meshio
+
+        path = Path(path)
+        tri = self.model.data.triangles
+        n = self.model.data.n_particles
+        cells = [("triangle", tri.astype(np.int32))] if len(tri) else [("vertex", np.arange(n, dtype=np.int32)[:, None])]
+        meshio.write(path, meshio.Mesh(self.positions(), cells))
+        return path
+
+    # ------------------------------------------------------------------ the loop
+    def run(self, frames: int, recorder=None, entity: str | None = None, progress: bool = True,
+            record_every: int = 1, translation=None) -> RunSummary:
+        """Run `frames` frames of `substeps` steps. With a Recorder, log the cloth under `entity` (default
+        "cloth", displaced by `translation` [m] in the viewer) at frame 0 and after every `record_every`-th frame. A BlowUpError propagates after the
+        frames so far are recorded; the summary is attached to it as `.summary`."""
+        if frames < 0:
+            raise ValueError("frames must be >= 0")
+        entity = entity or "cloth"
+        summary = RunSummary(self.name, self.integrator.name, self.dt, self.model.data.n_particles,
+                             self.model.data.n_springs, warnings=list(self.warnings))
+        stats_start = self._stats()
+        if recorder is not None:
+            t0 = time.perf_counter()
+            recorder.begin_cloth(entity, self, translation)
+            recorder.log_frame(entity, self, 0, self.measure())
+            summary.wall_record += time.perf_counter() - t0
+        bar = None
+        if progress:
+            from tqdm import tqdm
+
+            bar = tqdm(total=frames, unit="frame", desc=self.name, leave=False)
+        n = self.substeps
+        try:
+            for frame in range(1, frames + 1):
+                t0 = time.perf_counter()
+                self._advance(n)
+                try:
+                    m = self.check()  # also syncs: the measurement reads the device
+                except BlowUpError as err:
+                    summary.frames, summary.steps, summary.sim_time = frame, summary.steps + n, self.state.t
+                    summary.blowup = str(err)
+                    err.summary = summary
+                    if recorder is not None:
+                        recorder.log_event(entity, self, frame, str(err))
+                    raise
+                elapsed = time.perf_counter() - t0
+                summary.frames, summary.steps, summary.sim_time = frame, summary.steps + n, self.state.t
+                if frame == 1 and frames > 1:
+                    summary.first_frame_wall = elapsed  # compiles; kept out of the speed figures
+                else:
+                    summary.wall_step += elapsed
+                    summary.timed_steps += n
+                summary.final = m
+                summary.max_strain_seen = max(summary.max_strain_seen, m.max_strain)
+                if recorder is not None and (frame % record_every == 0 or frame == frames):
+                    t0 = time.perf_counter()
+                    recorder.log_frame(entity, self, frame, m, steps_per_s=n / elapsed if elapsed > 0 else None)
+                    if frame > 1:
+                        summary.wall_record += time.perf_counter() - t0
+                if bar is not None:
+                    bar.update(1)
+        finally:
+            if bar is not None:
+                bar.close()
+            if summary.steps:
+                summary.stats = {f"{k} per step": (v - stats_start.get(k, 0)) / summary.steps
+                                 for k, v in self._stats().items()}
+            if recorder is not None:
+                recorder.flush()
+        return summary

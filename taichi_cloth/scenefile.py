@@ -1,0 +1,351 @@
+"""TOML scene files -> Scene, with one clear error line per mistake.
+
+A scene names only what it needs; every table below except [cloth] and [integrator] is optional,
+and a component whose table is absent is never built. The schema (units in brackets):
+
+    name = "hanging_cloth"        # output file stem (default: the file's stem)
+    frames = 240                  # frames to run
+    fps = 60.0                    # frames per simulated second; steps per frame = round(1 / (fps dt))
+    precision = "f32"             # "f32" or "f64" fields
+    gravity = [0.0, -9.81, 0.0]   # [m/s^2]
+    air_damping = 0.1             # drag rate [1/s]
+
+    [cloth]                       # exactly one source: [cloth.grid] or [cloth.mesh]
+    material = "cotton"           # preset name, or a [cloth.material] table
+    [cloth.grid]
+    size = [1.0, 1.0]             # [m]
+    resolution = [48, 48]         # particles along u and v
+    center = [0.0, 1.0, 0.0]      # [m]
+    plane = "xy"                  # "xy" (hanging), "xz" (horizontal), "yz", "zy"
+    # [cloth.mesh] path = "flag.obj", scale = 1.0, translate = [0, 0, 0]
+    # [cloth.material] preset = "cotton", density [kg/m^2], stretch [N/m], shear [N/m], bend [N m], damping [s]
+
+    [integrator]
+    name = "approx-implicit"      # explicit | verlet | central-difference | approx-implicit | implicit
+    dt = 0.004                    # [s]
+    step_guard = "warn"           # warn | refuse | off, when an explicit dt exceeds its stable bound
+    # plus the integrator's own options, e.g. sweeps = 2, warm_start = false, jv_term = false (approx-implicit),
+    # cg_tolerance = 1e-3, cg_max_iterations = 200 (implicit)
+
+    [[pins]]                      # any number; each selects by indices, near (points [m]) and/or box
+    near = [[-0.5, 1.5, 0.0], [0.5, 1.5, 0.0]]
+    # indices = [0, 47]; box = { min = [..], max = [..] }; keyframes = [[t, dx, dy, dz], ...] moves the group
+
+    [wind]                        # velocity [m/s], coefficient [kg/(m^2 s)], gust (relative), gust_frequency [Hz]
+    [stretch_limit]               # max_strain (0.1 = 10 %), iterations (max passes), tolerance, omega
+    [output]                      # dir = "out", record = true, mesh = true, record_every = 1
+"""
+from __future__ import annotations
+
+import difflib
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+from .builder import ClothBuilder
+from .errors import MeshError, SceneError
+from .integrators import INTEGRATORS
+from .material import MATERIALS, Material, material as preset
+from .scene import STEP_GUARDS, Scene
+
+_MISSING = object()
+
+
+# ---------------------------------------------------------------------- a tiny declarative schema
+@dataclass
+class Field:
+    kind: str                      # number | int | bool | str | vec2 | vec3 | int2 | points | ints | keyframes
+    default: Any = _MISSING        # _MISSING = required
+    check: Callable[[Any], str | None] | None = None
+    choices: tuple | None = None
+
+
+@dataclass
+class Table:
+    fields: dict[str, Any]
+    required: bool = False
+    allow_string: Field | None = None  # a table that may also be given as a plain value (material = "cotton")
+    extra: bool = False                # unknown keys are checked later (integrator options)
+
+
+@dataclass
+class Array:
+    table: Table
+
+
+def _positive(v):
+    return None if v > 0 else "must be > 0"
+
+
+def _nonneg(v):
+    return None if v >= 0 else "must be >= 0"
+
+
+def _at_least(n):
+    return lambda v: None if v >= n else f"must be >= {n}"
+
+
+def _is_number(v):
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+
+def _is_int(v):
+    return isinstance(v, int) and not isinstance(v, bool)
+
+
+def _vector(n, elem=_is_number):
+    return lambda v: isinstance(v, list) and len(v) == n and all(elem(x) for x in v)
+
+
+_KINDS: dict[str, tuple[Callable[[Any], bool], str]] = {
+    "number": (_is_number, "a number"),
+    "int": (_is_int, "an integer"),
+    "bool": (lambda v: isinstance(v, bool), "true or false"),
+    "str": (lambda v: isinstance(v, str), "a string"),
+    "vec2": (_vector(2), "a list of 2 numbers"),
+    "vec3": (_vector(3), "a list of 3 numbers"),
+    "int2": (_vector(2, _is_int), "a list of 2 integers"),
+    "ints": (lambda v: isinstance(v, list) and all(_is_int(x) for x in v), "a list of integers"),
+    "points": (lambda v: isinstance(v, list) and len(v) > 0 and all(_vector(3)(p) for p in v),
+               "a list of [x, y, z] points"),
+    "keyframes": (lambda v: isinstance(v, list) and len(v) > 0 and all(_vector(4)(p) for p in v),
+                  "a list of [t, dx, dy, dz] rows"),
+}
+
+MATERIAL_TABLE = Table({"preset": Field("str", None, choices=tuple(MATERIALS)),
+                        "density": Field("number", None, _positive), "stretch": Field("number", None, _nonneg),
+                        "shear": Field("number", None, _nonneg), "bend": Field("number", None, _nonneg),
+                        "damping": Field("number", None, _nonneg)},
+                       allow_string=Field("str", choices=tuple(MATERIALS)))
+
+SCHEMA = Table({
+    "name": Field("str", None),
+    "frames": Field("int", 120, _at_least(0)),
+    "fps": Field("number", 60.0, _positive),
+    "precision": Field("str", "f32", choices=("f32", "f64")),
+    "gravity": Field("vec3", [0.0, -9.81, 0.0]),
+    "air_damping": Field("number", 0.1, _nonneg),
+    "cloth": Table({
+        "material": MATERIAL_TABLE,
+        "grid": Table({"size": Field("vec2", check=lambda v: None if min(v) > 0 else "must be positive"),
+                       "resolution": Field("int2", check=lambda v: None if min(v) >= 2 else "must be >= 2 each"),
+                       "center": Field("vec3", [0.0, 0.0, 0.0]),
+                       "plane": Field("str", "xy", choices=("xy", "xz", "yz", "zy"))}),
+        "mesh": Table({"path": Field("str"), "scale": Field("number", 1.0, _positive),
+                       "translate": Field("vec3", [0.0, 0.0, 0.0])}),
+    }, required=True),
+    "integrator": Table({"name": Field("str", choices=tuple(INTEGRATORS)),
+                         "dt": Field("number", check=_positive),
+                         "step_guard": Field("str", "warn", choices=STEP_GUARDS)}, required=True, extra=True),
+    "pins": Array(Table({"indices": Field("ints", []), "near": Field("points", []),
+                         "box": Table({"min": Field("vec3"), "max": Field("vec3")}),
+                         "keyframes": Field("keyframes", None)})),
+    "wind": Table({"velocity": Field("vec3"), "coefficient": Field("number", 1.0, _nonneg),
+                   "gust": Field("number", 0.0, _nonneg), "gust_frequency": Field("number", 0.5, _positive)}),
+    "stretch_limit": Table({"max_strain": Field("number", 0.1, _positive),
+                            "iterations": Field("int", 100, _at_least(1)),
+                            "tolerance": Field("number", 1e-3, _nonneg),
+                            "omega": Field("number", 1.5, lambda v: None if 0 < v < 2 else "must lie in (0, 2)")}),
+    "output": Table({"dir": Field("str", "out"), "record": Field("bool", True), "mesh": Field("bool", True),
+                     "record_every": Field("int", 1, _at_least(1))}),
+})
+
+
+class _Validator:
+    """Checks data against the schema. Locations read like the TOML: `[cloth.grid] size`, `[[pins]] #2 near`."""
+
+    def __init__(self, source: str):
+        self.source = source
+
+    def fail(self, where: str, msg: str):
+        raise SceneError(f"{self.source}: {where}: {msg}" if where else f"{self.source}: {msg}")
+
+    @staticmethod
+    def key_at(table: str, key: str) -> str:
+        return f"{table} {key}" if table else key
+
+    def value(self, spec: Field, v, where: str):
+        ok, what = _KINDS[spec.kind]
+        if spec.kind == "number" and _is_int(v):
+            v = float(v)
+        if not ok(v):
+            self.fail(where, f"must be {what}, got {v!r}")
+        if spec.choices is not None and v not in spec.choices:
+            self.fail(where, f"{v!r} is not one of: {', '.join(map(str, spec.choices))}")
+        if spec.check is not None:
+            problem = spec.check(v)
+            if problem:
+                self.fail(where, f"{problem}, got {v!r}")
+        return v
+
+    def table(self, spec: Table, data, name: str, label: str) -> dict:
+        """Validate table `data`; `name` is its dotted TOML name ("" at top level), `label` how errors show it."""
+        if not isinstance(data, dict):
+            if spec.allow_string is not None:
+                return {"preset": self.value(spec.allow_string, data, label)}
+            self.fail(label, f"must be a table, got {data!r}")
+        out = {}
+        for key, value in data.items():
+            sub = spec.fields.get(key)
+            if sub is None:
+                if spec.extra:
+                    out[key] = value
+                    continue
+                near = difflib.get_close_matches(key, list(spec.fields), n=1)
+                hint = f" (did you mean {near[0]!r}?)" if near else f" (known keys: {', '.join(spec.fields)})"
+                self.fail(label or "top level", f"unknown key {key!r}{hint}")
+            out[key] = self.node(sub, value, name, key, label)
+        for key, sub in spec.fields.items():
+            if key in out:
+                continue
+            if isinstance(sub, Field):
+                if sub.default is _MISSING:
+                    self.fail(label or "top level", f"missing required key {key!r}")
+                out[key] = sub.default
+            elif isinstance(sub, Table) and sub.required:
+                self.fail(label or "top level", f"missing required table [{self.dotted(name, key)}]")
+            elif isinstance(sub, Array):
+                out[key] = []
+        return out
+
+    @staticmethod
+    def dotted(name: str, key: str) -> str:
+        return f"{name}.{key}" if name else key
+
+    def node(self, spec, value, name: str, key: str, label: str):
+        if isinstance(spec, Field):
+            return self.value(spec, value, self.key_at(label, key))
+        if isinstance(spec, Table):
+            sub = self.dotted(name, key)
+            return self.table(spec, value, sub, f"[{sub}]" if not label.startswith("[[") else f"{label} {key}")
+        if isinstance(spec, Array):
+            if not isinstance(value, list) or not all(isinstance(v, dict) for v in value):
+                self.fail(self.key_at(label, key), "must be an array of tables ([[...]])")
+            return [self.table(spec.table, v, key, f"[[{key}]] #{k + 1}") for k, v in enumerate(value)]
+        raise TypeError(spec)
+
+
+# ---------------------------------------------------------------------- building
+@dataclass
+class LoadedScene:
+    """A parsed scene file: the Scene plus what the run loop needs."""
+
+    scene: Scene
+    name: str
+    frames: int
+    output: dict
+    config: dict = field(repr=False, default_factory=dict)
+
+
+def parse_scene(source: str | Path | dict, base_dir: Path | None = None, label: str | None = None) -> dict:
+    """Validate a scene (TOML path or dict) and return the config dict with defaults filled in.
+    Raises SceneError with one line naming the file, table and key."""
+    if isinstance(source, dict):
+        data, label, base_dir = source, label or "scene", base_dir or Path.cwd()
+    else:
+        path = Path(source)
+        label = label or str(path)
+        if not path.is_file():
+            raise SceneError(f"{label}: no such scene file")
+        try:
+            data = tomllib.loads(path.read_text(encoding="utf-8"))
+        except tomllib.TOMLDecodeError as exc:
+            raise SceneError(f"{label}: not valid TOML: {exc}") from None
+        except UnicodeDecodeError:
+            raise SceneError(f"{label}: not a UTF-8 text file") from None
+        base_dir = base_dir or path.parent
+        data.setdefault("name", path.stem)
+    v = _Validator(label)
+    cfg = v.table(SCHEMA, data, "", "")
+    cfg["name"] = cfg["name"] or "scene"
+    cfg["_label"], cfg["_base_dir"] = label, base_dir
+    cloth = cfg["cloth"]
+    sources = [k for k in ("grid", "mesh") if cloth.get(k) is not None]
+    if len(sources) != 1:
+        v.fail("[cloth]", "needs exactly one source table, [cloth.grid] or [cloth.mesh]"
+               + (f" (got {' and '.join(sources)})" if sources else ""))
+    _check_integrator_options(v, cfg["integrator"])
+    for k, pin in enumerate(cfg["pins"]):
+        if not pin["indices"] and not pin["near"] and pin.get("box") is None:
+            v.fail(f"[[pins]] #{k + 1}", "selects nothing: give indices, near or box")
+        if pin["keyframes"] is not None and any(b[0] <= a[0] for a, b in zip(pin["keyframes"], pin["keyframes"][1:])):
+            v.fail(f"[[pins]] #{k + 1} keyframes", "times must increase strictly")
+    return cfg
+
+
+def _check_integrator_options(v: _Validator, integ: dict) -> None:
+    cls = INTEGRATORS[integ["name"]]
+    for key in [k for k in integ if k not in ("name", "dt", "step_guard")]:
+        opt = cls.OPTIONS.get(key)
+        where = f"[integrator] {key}"
+        if opt is None:
+            known = ", ".join(cls.OPTIONS) or "none"
+            v.fail("[integrator]", f"unknown key {key!r} for integrator {integ['name']!r} (its options: {known})")
+        val = integ[key]
+        kind = {bool: "bool", int: "int", float: "number"}[opt.type]
+        integ[key] = v.value(Field(kind, check=opt.check), val, where)
+
+
+def _material(cfg: dict) -> Material:
+    m = cfg["cloth"].get("material") or {"preset": "cotton"}
+    base = preset(m.get("preset") or "cotton")
+    return base.replace(**{k: val for k, val in m.items() if k != "preset" and val is not None})
+
+
+def build_scene(cfg: dict) -> Scene:
+    """Build the Scene a validated config describes (only the components it names)."""
+    label = cfg["_label"]
+    cloth_cfg, mat = cfg["cloth"], _material(cfg)
+    try:
+        if cloth_cfg.get("grid") is not None:
+            g = cloth_cfg["grid"]
+            data = ClothBuilder.grid(g["size"], g["resolution"], mat, g["center"], g["plane"])
+        else:
+            m = cloth_cfg["mesh"]
+            path = Path(m["path"])
+            path = path if path.is_absolute() else cfg["_base_dir"] / path
+            data = ClothBuilder.mesh_file(path, mat, m["scale"], m["translate"])
+    except MeshError as exc:
+        raise SceneError(f"{label}: [cloth.mesh] path: {exc}") from None
+    integ = dict(cfg["integrator"])
+    name, dt, guard = integ.pop("name"), integ.pop("dt"), integ.pop("step_guard")
+    pins = [dict(indices=p["indices"], near=p["near"],
+                 box=(p["box"]["min"], p["box"]["max"]) if p.get("box") else None, path=p["keyframes"])
+            for p in cfg["pins"]]
+    try:
+        return Scene(data, name=cfg["name"], integrator=name, dt=dt, integrator_options=integ,
+                     gravity=cfg["gravity"], air_damping=cfg["air_damping"], pins=pins, wind=cfg.get("wind"),
+                     stretch_limit=cfg.get("stretch_limit"), fps=cfg["fps"], precision=cfg["precision"],
+                     step_guard=guard)
+    except SceneError as exc:
+        raise SceneError(f"{label}: {exc}") from None
+    except ValueError as exc:  # a component refused its parameters
+        raise SceneError(f"{label}: {exc}") from None
+
+
+def load_scene(source: str | Path | dict, *, frames: int | None = None, integrator: str | None = None,
+               dt: float | None = None, precision: str | None = None, out: str | Path | None = None,
+               integrator_options: dict | None = None) -> LoadedScene:
+    """Parse and build a scene; keyword arguments override the file (as the CLI flags do).
+
+    Overriding the integrator drops the file's options that the new integrator does not have."""
+    cfg = parse_scene(source)
+    v = _Validator(cfg["_label"] + " (override)")
+    if integrator is not None:
+        v.value(Field("str", choices=tuple(INTEGRATORS)), integrator, "--integrator")
+        if integrator != cfg["integrator"]["name"]:
+            cfg["integrator"] = {k: cfg["integrator"][k] for k in ("dt", "step_guard")} | {"name": integrator}
+    if integrator_options:
+        cfg["integrator"].update(integrator_options)
+        _check_integrator_options(v, cfg["integrator"])
+    if dt is not None:
+        cfg["integrator"]["dt"] = v.value(Field("number", check=_positive), dt, "--dt")
+    if frames is not None:
+        cfg["frames"] = v.value(Field("int", check=_at_least(0)), frames, "--frames")
+    if precision is not None:
+        cfg["precision"] = v.value(Field("str", choices=("f32", "f64")), precision, "--precision")
+    if out is not None:
+        cfg["output"]["dir"] = str(out)
+    return LoadedScene(build_scene(cfg), cfg["name"], cfg["frames"], cfg["output"], cfg)
