@@ -1,0 +1,34 @@
+"""One Taichi runtime (ti.cpu) for the whole session: re-initialising frees fields and costs seconds."""
+import warnings
+
+import numpy as np
+import pytest
+
+import taichi_cloth as tc
+
+
+@pytest.fixture(scope="session", autouse=True)
+def taichi_cpu():
+    tc.init("cpu")
+    yield
+
+
+@pytest.fixture
+def quiet():
+    """Silence the engine's expected warnings (step guard, unstable variants) inside a test."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        yield
+
+
+def grid_top_corners(n: int) -> list[int]:
+    """Indices of the two top corners of an n x n grid built in the xy plane (v up)."""
+    return [n * (n - 1), n * n - 1]
+
+
+def max_structural_strain(scene) -> float:
+    d = scene.model.data
+    x = scene.positions()
+    sel = d.kind == tc.SpringKind.STRUCTURAL
+    length = np.linalg.norm(x[d.springs[sel, 1]] - x[d.springs[sel, 0]], axis=1)
+    return float((length / d.rest_length[sel] - 1).max())
