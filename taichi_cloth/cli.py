@@ -88,10 +88,11 @@ def _cmd_info(args) -> int:
     from .integrators import INTEGRATORS
     from .material import MATERIALS
 
-    print(f"taichi {taichi.__version__}, numpy {numpy.__version__}, rerun-sdk {rerun.__version__}")
+    version = ".".join(map(str, taichi.__version__)) if isinstance(taichi.__version__, tuple) else taichi.__version__
+    print(f"taichi {version}, numpy {numpy.__version__}, rerun-sdk {rerun.__version__}")
     print("integrators:")
     for name, cls in INTEGRATORS.items():
-        kind = "unconditionally stable" if cls.unconditionally_stable else "explicit, step-limited"
+        kind = "no step limit" if cls.unconditionally_stable else "explicit, step limited (ALGORITHMS.md 1.4)"
         print(f"  {name:20s} {kind}")
         for opt_name, opt in cls.OPTIONS.items():
             print(f"      {opt_name} = {opt.default!r}: {opt.doc}")

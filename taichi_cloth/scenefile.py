@@ -68,6 +68,7 @@ class Table:
     required: bool = False
     allow_string: Field | None = None  # a table that may also be given as a plain value (material = "cotton")
     extra: bool = False                # unknown keys are checked later (integrator options)
+    always: bool = False               # filled with its defaults when absent ([output])
 
 
 @dataclass
@@ -149,7 +150,7 @@ SCHEMA = Table({
                             "tolerance": Field("number", 1e-3, _nonneg),
                             "omega": Field("number", 1.5, lambda v: None if 0 < v < 2 else "must lie in (0, 2)")}),
     "output": Table({"dir": Field("str", "out"), "record": Field("bool", True), "mesh": Field("bool", True),
-                     "record_every": Field("int", 1, _at_least(1))}),
+                     "record_every": Field("int", 1, _at_least(1))}, always=True),
 })
 
 
@@ -206,6 +207,8 @@ class _Validator:
                 out[key] = sub.default
             elif isinstance(sub, Table) and sub.required:
                 self.fail(label or "top level", f"missing required table [{self.dotted(name, key)}]")
+            elif isinstance(sub, Table) and sub.always:
+                out[key] = self.table(sub, {}, self.dotted(name, key), f"[{self.dotted(name, key)}]")
             elif isinstance(sub, Array):
                 out[key] = []
         return out
@@ -218,6 +221,8 @@ class _Validator:
         if isinstance(spec, Field):
             return self.value(spec, value, self.key_at(label, key))
         if isinstance(spec, Table):
+            if not isinstance(value, dict) and spec.allow_string is not None:
+                return {"preset": self.value(spec.allow_string, value, self.key_at(label, key))}
             sub = self.dotted(name, key)
             return self.table(spec, value, sub, f"[{sub}]" if not label.startswith("[[") else f"{label} {key}")
         if isinstance(spec, Array):

@@ -27,6 +27,10 @@ class Implicit(Integrator):
         "cg_max_iterations": Option(int, 200, "CG iteration cap per step", at_least_one),
     }
 
+    #: CG iterations unrolled into one kernel launch; iterations past convergence inside a chunk are no-ops
+    CHUNK = 8
+    _DELTA, _THRESH, _BETA, _ACTIVE, _ITER, _MAXIT, _DELTA0 = range(7)  # slots of self.cg
+
     def __init__(self, model, state, forces, **options):
         super().__init__(model, state, forces, **options)
         fp = model.fp
@@ -37,26 +41,23 @@ class Implicit(Integrator):
         self.b = ti.Vector.field(3, fp, P)
         self.inv_diag = ti.Vector.field(3, fp, P)
         self.dv, self.r, self.z, self.p, self.q = (ti.Vector.field(3, fp, P) for _ in range(5))
+        self.cg = ti.field(ti.f64, 7)               # CG scalars (see the indices above), kept on the device
         self.stats = {"cg_iterations": 0, "cg_unconverged_steps": 0}
         self.last_residual = 0.0  # sqrt(r.Pr / b.Pb) at the end of the last step
 
     def step(self, dt: float) -> None:
-        tol2 = self.options["cg_tolerance"] ** 2
         self.forces.prepare(self.state.t)
-        delta0 = delta = self._assemble(dt)
-        it = 0
-        beta = 0.0
-        while it < self.options["cg_max_iterations"] and delta > tol2 * delta0:
-            pq = self._direction_and_product(beta, dt * self.forces.air_damping_value)
-            if pq <= 0.0:  # A is SPD; pq <= 0 only from round-off at convergence
+        self._assemble(dt, self.options["cg_tolerance"] ** 2, self.options["cg_max_iterations"])
+        h_gamma = dt * self.forces.air_damping_value
+        while True:
+            self._cg_chunk(h_gamma)
+            cg = self.cg.to_numpy()  # one transfer for all scalars
+            active, it, delta, delta0 = cg[[self._ACTIVE, self._ITER, self._DELTA, self._DELTA0]]
+            if not active:
                 break
-            delta_new = self._update(delta / pq)
-            beta = delta_new / delta
-            delta = delta_new
-            it += 1
         self._integrate(dt)
         self.last_residual = math.sqrt(max(delta, 0.0) / delta0) if delta0 > 0 else 0.0
-        self.stats["cg_iterations"] += it
+        self.stats["cg_iterations"] += int(it)
         self.stats["cg_unconverged_steps"] += int(self.last_residual > self.options["cg_tolerance"])
         self.state.t += dt
 
@@ -73,7 +74,7 @@ class Implicit(Integrator):
         return out
 
     @ti.kernel
-    def _assemble(self, dt: ti.f64) -> ti.f64:
+    def _assemble(self, dt: ti.f64, tol2: ti.f64, max_iterations: ti.i32):
         m, s, fm = self.model, self.state, self.forces
         h = ti.cast(dt, m.fp)
         for sp in range(m.n_springs[None]):
@@ -114,39 +115,52 @@ class Implicit(Integrator):
                 self.z[i] = z
                 self.p[i] = zero
                 delta += ti.cast(b.dot(z), ti.f64)
-        return delta
+        self.cg[self._DELTA] = delta
+        self.cg[self._DELTA0] = delta
+        self.cg[self._THRESH] = tol2 * delta
+        self.cg[self._ITER] = 0.0
+        self.cg[self._BETA] = 0.0
+        self.cg[self._MAXIT] = ti.cast(max_iterations, ti.f64)
+        self.cg[self._ACTIVE] = 1.0 if delta > tol2 * delta and max_iterations > 0 else 0.0
 
     @ti.kernel
-    def _direction_and_product(self, beta: ti.f64, h_gamma: ti.f64) -> ti.f64:
+    def _cg_chunk(self, h_gamma: ti.f64):
+        """CHUNK preconditioned CG iterations (BW98 modified PCG with the pinned rows filtered out).
+        Scalars live in self.cg; once converged (or at the cap) the remaining iterations change nothing."""
         m = self.model
-        bt = ti.cast(beta, m.fp)
+        cg = ti.static(self.cg)
         mass_scale = 1.0 + ti.cast(h_gamma, m.fp)
-        for i in range(m.n_particles[None]):
-            if m.inv_mass[i] != 0:
-                self.p[i] = self.z[i] + bt * self.p[i]
-        pq = ti.cast(0.0, ti.f64)
-        for i in range(m.n_particles[None]):
-            q = ti.Vector.zero(m.fp, 3)
-            if m.inv_mass[i] != 0:
-                q = m.mass[i] * mass_scale * self.p[i] + self._product(i, self.p)
-            self.q[i] = q
-            pq += ti.cast(self.p[i].dot(q), ti.f64)
-        return pq
-
-    @ti.kernel
-    def _update(self, alpha: ti.f64) -> ti.f64:
-        m = self.model
-        a = ti.cast(alpha, m.fp)
-        delta = ti.cast(0.0, ti.f64)
-        for i in range(m.n_particles[None]):
-            if m.inv_mass[i] != 0:
-                self.dv[i] += a * self.p[i]
-                r = self.r[i] - a * self.q[i]
-                self.r[i] = r
-                z = r * self.inv_diag[i]
-                self.z[i] = z
-                delta += ti.cast(r.dot(z), ti.f64)
-        return delta
+        for _ in ti.static(range(self.CHUNK)):
+            # p = z + beta p (beta = 0 on the first iteration since p = 0), then q = A p and p.q
+            for i in range(m.n_particles[None]):
+                if m.inv_mass[i] != 0 and cg[self._ACTIVE] != 0:
+                    self.p[i] = self.z[i] + self.p[i] * ti.cast(cg[self._BETA], m.fp)
+            pq = ti.cast(0.0, ti.f64)
+            for i in range(m.n_particles[None]):
+                q = ti.Vector.zero(m.fp, 3)
+                if m.inv_mass[i] != 0 and cg[self._ACTIVE] != 0:
+                    q = m.mass[i] * mass_scale * self.p[i] + self._product(i, self.p)
+                self.q[i] = q
+                pq += ti.cast(self.p[i].dot(q), ti.f64)
+            alpha = ti.cast(0.0, ti.f64)
+            if cg[self._ACTIVE] != 0 and pq > 0:
+                alpha = cg[self._DELTA] / pq
+            a = ti.cast(alpha, m.fp)
+            delta_new = ti.cast(0.0, ti.f64)
+            for i in range(m.n_particles[None]):
+                if m.inv_mass[i] != 0:
+                    self.dv[i] += a * self.p[i]
+                    r = self.r[i] - a * self.q[i]
+                    self.r[i] = r
+                    z = r * self.inv_diag[i]
+                    self.z[i] = z
+                    delta_new += ti.cast(r.dot(z), ti.f64)
+            if cg[self._ACTIVE] != 0:
+                cg[self._ITER] += 1.0
+                cg[self._BETA] = delta_new / cg[self._DELTA] if pq > 0 else 0.0
+                cg[self._DELTA] = delta_new
+                if delta_new <= cg[self._THRESH] or cg[self._ITER] >= cg[self._MAXIT] or pq <= 0:
+                    cg[self._ACTIVE] = 0.0
 
     @ti.kernel
     def _integrate(self, dt: ti.f64):
