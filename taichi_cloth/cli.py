@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import shutil
 import sys
 from pathlib import Path
 
@@ -61,8 +62,21 @@ def run_scene_file(scene_path, args, recorder=None, entity=None, translation=Non
     if not quiet:
         print(summary.format())
         if own:
-            print(f"open the recording with:  rerun {rec.path}")
+            print(f"open the recording with:  {rerun_command()} {rec.path}")
     return summary, loaded
+
+
+def rerun_command() -> str:
+    """How to start the Rerun viewer from here: plain `rerun` when it is on PATH, else the one installed beside
+    this Python (e.g. .venv/bin/rerun when the venv is not activated)."""
+    beside = Path(sys.executable).parent / "rerun"
+    on_path = shutil.which("rerun")
+    if not beside.is_file() or (on_path and Path(on_path).resolve() == beside.resolve()):
+        return "rerun"
+    try:
+        return str(beside.relative_to(Path.cwd()))
+    except ValueError:
+        return str(beside)
 
 
 def _cmd_run(args) -> int:

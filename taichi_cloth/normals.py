@@ -14,38 +14,40 @@ class VertexNormals:
         self.normal = ti.Vector.field(3, model.fp, model.capacity[0])
         self.triangle_area = ti.Vector.field(3, model.fp, max(model.capacity[2], 1))  # area vectors [m^2]
 
+    @ti.func
+    def triangle_area_vector(self, t):
+        c = self.model.triangles[t]
+        p0 = self.state.x[c[0]]
+        return 0.5 * (self.state.x[c[1]] - p0).cross(self.state.x[c[2]] - p0)
+
+    @ti.func
+    def vertex_normal(self, i, unit: ti.template()):
+        """Sum of the area vectors of vertex i's triangles / 3 (after the triangle pass), or its unit vector."""
+        m = self.model
+        n = ti.Vector.zero(m.fp, 3)
+        for e in range(m.tri_offset[i], m.tri_offset[i + 1]):
+            n += self.triangle_area[m.tri_list[e]]
+        n /= 3.0
+        if ti.static(unit):
+            length = n.norm()
+            n = n / length if length > 0 else ti.Vector.zero(m.fp, 3)
+        return n
+
     @ti.kernel
     def compute(self, unit: ti.template()):
-        m, s = self.model, self.state
-        for t in range(m.n_triangles[None]):
-            c = m.triangles[t]
-            p0 = s.x[c[0]]
-            self.triangle_area[t] = 0.5 * (s.x[c[1]] - p0).cross(s.x[c[2]] - p0)
-        for i in range(m.n_particles[None]):
-            n = ti.Vector.zero(m.fp, 3)
-            for e in range(m.tri_offset[i], m.tri_offset[i + 1]):
-                n += self.triangle_area[m.tri_list[e]]
-            n /= 3.0
-            if ti.static(unit):
-                length = n.norm()
-                n = n / length if length > 0 else ti.Vector.zero(m.fp, 3)
-            self.normal[i] = n
+        for t in range(self.model.n_triangles[None]):
+            self.triangle_area[t] = self.triangle_area_vector(t)
+        for i in range(self.model.n_particles[None]):
+            self.normal[i] = self.vertex_normal(i, unit)
 
     @ti.kernel
     def _snapshot(self, positions: ti.types.ndarray(dtype=ti.math.vec3, ndim=1),
                   normals: ti.types.ndarray(dtype=ti.math.vec3, ndim=1)):
-        m, s = self.model, self.state
-        for t in range(m.n_triangles[None]):
-            c = m.triangles[t]
-            p0 = s.x[c[0]]
-            self.triangle_area[t] = 0.5 * (s.x[c[1]] - p0).cross(s.x[c[2]] - p0)
-        for i in range(m.n_particles[None]):
-            n = ti.Vector.zero(m.fp, 3)
-            for e in range(m.tri_offset[i], m.tri_offset[i + 1]):
-                n += self.triangle_area[m.tri_list[e]]
-            length = n.norm()
-            normals[i] = ti.cast(n / length if length > 0 else ti.Vector.zero(m.fp, 3), ti.f32)
-            positions[i] = ti.cast(s.x[i], ti.f32)
+        for t in range(self.model.n_triangles[None]):
+            self.triangle_area[t] = self.triangle_area_vector(t)
+        for i in range(self.model.n_particles[None]):
+            normals[i] = ti.cast(self.vertex_normal(i, True), ti.f32)
+            positions[i] = ti.cast(self.state.x[i], ti.f32)
 
     def snapshot(self) -> tuple[np.ndarray, np.ndarray]:
         """Fresh (P,3) float32 arrays of the positions [m] and unit normals, filled by one kernel launch

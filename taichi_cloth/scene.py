@@ -148,8 +148,8 @@ class Scene:
     # ------------------------------------------------------------------ construction helpers
     @classmethod
     def from_file(cls, path, **overrides) -> "Scene":
-        """Build a scene from a TOML scene file; keyword overrides (frames are not a scene property:
-        see scenefile.load_scene) replace the file's integrator, dt, precision."""
+        """The Scene of a TOML scene file; overrides as scenefile.load_scene (integrator, dt, precision...).
+        Use load_scene itself to also get the file's frame count and output settings."""
         from .scenefile import load_scene
 
         return load_scene(path, **overrides).scene
@@ -279,8 +279,9 @@ class Scene:
     def run(self, frames: int, recorder=None, entity: str | None = None, progress: bool = True,
             record_every: int = 1, translation=None) -> RunSummary:
         """Run `frames` frames of `substeps` steps. With a Recorder, log the cloth under `entity` (default
-        "cloth", displaced by `translation` [m] in the viewer) at frame 0 and after every `record_every`-th frame. A BlowUpError propagates after the
-        frames so far are recorded; the summary is attached to it as `.summary`."""
+        "cloth", displaced by `translation` [m] in the viewer) at frame 0 and after every `record_every`-th
+        frame. A BlowUpError propagates after the frames so far are recorded; the summary is attached to it
+        as `.summary`."""
         if frames < 0:
             raise ValueError("frames must be >= 0")
         entity = entity or "cloth"

@@ -59,13 +59,8 @@ class ApproxImplicit(Integrator):
     def reset(self) -> None:
         self.dv.fill(0)
 
-    def step(self, dt: float) -> None:
-        self.forces.prepare(self.state.t)
-        self._step(dt)
-        self.state.t += dt
-
     @ti.kernel
-    def _step(self, dt: ti.f64):
+    def _advance(self, dt: ti.f64):
         m, s, fm = self.model, self.state, self.forces
         h = ti.cast(dt, m.fp)
         for i in range(m.n_particles[None]):

@@ -24,7 +24,7 @@ def at_least_one(v):
 
 
 class Integrator:
-    """Base class. Subclasses set `name`, `OPTIONS`, `unconditionally_stable` and implement `step`.
+    """Base class. Subclasses set `name`, `OPTIONS`, `unconditionally_stable` and implement `_advance(dt)`.
 
     An explicit integrator also implements `is_stable(h, omega, gamma, beta)`: the closed-form linear
     stability condition for a mode of frequency omega [rad/s] with air drag rate gamma [1/s] and
@@ -53,6 +53,12 @@ class Integrator:
         self.stats: dict[str, float] = {}
 
     def step(self, dt: float) -> None:
+        """Advance the state by dt [s]: forces are prepared for time t, then the scheme's own update."""
+        self.forces.prepare(self.state.t)
+        self._advance(dt)
+        self.state.t += dt
+
+    def _advance(self, dt: float) -> None:
         raise NotImplementedError
 
     def reset(self) -> None:

@@ -19,22 +19,10 @@ class CentralDifference(HistoryIntegrator):
     def _damping_factor(self, dt: float) -> float:
         return 0.5 * self.forces.air_damping_value * dt  # g h / (2 m)
 
-    @ti.kernel
-    def _step(self, dt: ti.f64, half_gh: ti.f64, first: ti.i32):
-        m, s, fm = self.model, self.state, self.forces
-        h = ti.cast(dt, m.fp)
-        g = ti.cast(half_gh, m.fp)
-        for i in range(m.n_particles[None]):
-            fm.f[i] = fm.particle_force(i, False)
-        for i in range(m.n_particles[None]):
-            if m.inv_mass[i] != 0:
-                a = m.inv_mass[i] * fm.f[i]
-                d = h * s.v[i]
-                if first:
-                    d -= 0.5 * h * h * a
-                d = (h * h * a + (1.0 - g) * d) / (1.0 + g)
-                s.v[i] = d / h
-                s.x[i] += d
+    @ti.func
+    def displacement(self, d, a, h, c):
+        """x+ - x from d = x - x-: eq. (14) divided by m/h^2, with c = g h / (2 m)."""
+        return (h * h * a + (1.0 - c) * d) / (1.0 + c)
 
     @classmethod
     def is_stable(cls, h, omega, gamma, beta):

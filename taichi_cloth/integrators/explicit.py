@@ -9,13 +9,8 @@ from .base import Integrator
 class SymplecticEuler(Integrator):
     name = "explicit"
 
-    def step(self, dt: float) -> None:
-        self.forces.prepare(self.state.t)
-        self._step(dt)
-        self.state.t += dt
-
     @ti.kernel
-    def _step(self, dt: ti.f64):
+    def _advance(self, dt: ti.f64):
         m, s, fm = self.model, self.state, self.forces
         h = ti.cast(dt, m.fp)
         for i in range(m.n_particles[None]):

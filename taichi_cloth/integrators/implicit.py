@@ -45,8 +45,7 @@ class Implicit(Integrator):
         self.stats = {"cg_iterations": 0, "cg_unconverged_steps": 0}
         self.last_residual = 0.0  # sqrt(r.Pr / b.Pb) at the end of the last step
 
-    def step(self, dt: float) -> None:
-        self.forces.prepare(self.state.t)
+    def _advance(self, dt: float) -> None:
         self._assemble(dt, self.options["cg_tolerance"] ** 2, self.options["cg_max_iterations"])
         h_gamma = dt * self.forces.air_damping_value
         while True:
@@ -59,7 +58,6 @@ class Implicit(Integrator):
         self.last_residual = math.sqrt(max(delta, 0.0) / delta0) if delta0 > 0 else 0.0
         self.stats["cg_iterations"] += int(it)
         self.stats["cg_unconverged_steps"] += int(self.last_residual > self.options["cg_tolerance"])
-        self.state.t += dt
 
     @ti.func
     def _product(self, i, vec: ti.template()):

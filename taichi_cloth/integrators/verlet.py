@@ -28,22 +28,13 @@ class HistoryIntegrator(Integrator):
     def reset(self) -> None:
         self._started = False
 
-    def step(self, dt: float) -> None:
-        self.forces.prepare(self.state.t)
+    def _advance(self, dt: float) -> None:
         self._step(dt, self._damping_factor(dt), int(not self._started))
         self._started = True
-        self.state.t += dt
 
     def _damping_factor(self, dt: float) -> float:
+        """The scheme's per-step damping parameter, passed to `displacement` as c."""
         raise NotImplementedError
-
-
-@ti.data_oriented
-class Verlet(HistoryIntegrator):
-    name = "verlet"
-
-    def _damping_factor(self, dt: float) -> float:
-        return 1.0 - math.exp(-self.forces.air_damping_value * dt)
 
     @ti.kernel
     def _step(self, dt: ti.f64, c_: ti.f64, first: ti.i32):
@@ -58,9 +49,22 @@ class Verlet(HistoryIntegrator):
                 d = h * s.v[i]
                 if first:
                     d -= 0.5 * h * h * a  # x0 - x(-h) from the Taylor start-up
-                d = (1.0 - c) * d + a * h * h
+                d = self.displacement(d, a, h, c)
                 s.v[i] = d / h
                 s.x[i] += d
+
+
+@ti.data_oriented
+class Verlet(HistoryIntegrator):
+    name = "verlet"
+
+    def _damping_factor(self, dt: float) -> float:
+        return 1.0 - math.exp(-self.forces.air_damping_value * dt)
+
+    @ti.func
+    def displacement(self, d, a, h, c):
+        """x+ - x from d = x - x-: seed 002, (1 - c) d + a h^2."""
+        return (1.0 - c) * d + a * h * h
 
     @classmethod
     def is_stable(cls, h, omega, gamma, beta):
