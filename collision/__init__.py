@@ -1,7 +1,18 @@
-"""Collision (seed 000 section 2.3, seed 002, seed 004): voxel grid over a body mesh, fuzzy-ordered
-continuous particle-triangle tests, sphere and plane colliders, self-collision.
+"""Collision (seed 000 section 2.3, seed 002 section 3.2.3, seed 004 eqs. 5 and 15).
 
-Works on plain Taichi fields and numpy arrays and does not import taichi_cloth, so it can be tested
-alone; taichi_cloth.Scene composes it when a scene names [[colliders]]. Nothing is implemented yet
-(tracked as the collision issue); importing it builds and compiles nothing.
+- MeshCollider: a triangle body (the mannequin) binned in a VoxelGrid built by Taichi kernels, with fuzzy
+  (mu-ranked) continuous particle-triangle tests, proximity contact and Coulomb friction;
+- PrimitiveColliders: spheres (seed 002's push-out), capsules and planes;
+- meshes: loading, validation and repair of triangle meshes; mannequin: the shipped CC0 body.
+
+Works on plain Taichi fields and numpy arrays and never imports taichi_cloth, so it is testable alone;
+taichi_cloth.Scene composes it when a scene names [[colliders]]. Importing it compiles nothing.
 """
+from .body import MeshCollider
+from .errors import MeshError
+from .grid import VoxelGrid
+from .meshes import load_triangle_mesh, repair_triangle_mesh, validate_triangle_mesh
+from .primitives import PrimitiveColliders
+
+__all__ = ["MeshCollider", "MeshError", "PrimitiveColliders", "VoxelGrid", "load_triangle_mesh",
+           "repair_triangle_mesh", "validate_triangle_mesh"]

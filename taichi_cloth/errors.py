@@ -9,8 +9,9 @@ class SceneError(TaichiClothError, ValueError):
     """A scene (file or dict) is malformed: the message names the file, the table and the key."""
 
 
-class MeshError(TaichiClothError, ValueError):
-    """A mesh is unusable (empty, non-manifold, NaN vertices, degenerate faces): the message names the file."""
+# A mesh is unusable (missing, empty, non-manifold, NaN vertices, degenerate faces): the message names the file.
+# Defined by the collision package (which loads bodies and cloth meshes and must not import taichi_cloth).
+from collision.errors import MeshError  # noqa: E402,F401
 
 
 class BlowUpError(TaichiClothError, RuntimeError):

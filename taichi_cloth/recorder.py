@@ -15,6 +15,21 @@ import rerun as rr
 
 CLOTH_COLOR = (200, 90, 60, 255)
 PIN_COLOR = (30, 30, 30, 255)
+BODY_COLOR = (170, 170, 180, 255)
+FLOOR_COLOR = (120, 140, 120, 255)
+
+
+def _quaternion_z_to(direction) -> list:
+    """xyzw quaternion rotating +z onto `direction` (Rerun capsules extend along +z)."""
+    d = np.asarray(direction, dtype=np.float64)
+    d = d / np.linalg.norm(d)
+    z = np.array([0.0, 0.0, 1.0])
+    c = float(z @ d)
+    if c < -1 + 1e-9:
+        return [1.0, 0.0, 0.0, 0.0]
+    axis = np.cross(z, d)
+    q = np.array([*axis, 1.0 + c])
+    return (q / np.linalg.norm(q)).tolist()
 
 
 class Recorder:
@@ -43,6 +58,34 @@ class Recorder:
         if len(scene.pinned_indices) and scene.pins is None:
             rec.log(f"{entity}/pins", rr.Points3D(scene.model.data.positions[scene.pinned_indices].astype(np.float32),
                                                   radii=0.01, colors=PIN_COLOR), static=True)
+
+    def log_collider(self, entity: str, description: dict) -> None:
+        """A collider, once, as static data: a body mesh, spheres, capsules and planes (a 4 m square)."""
+        rec = self.stream
+        if description["kind"] == "mesh":
+            rec.log(entity, rr.Mesh3D(vertex_positions=np.asarray(description["vertices"], np.float32),
+                                      triangle_indices=np.asarray(description["triangles"], np.uint32),
+                                      albedo_factor=BODY_COLOR), static=True)
+            return
+        if description["spheres"]:
+            rec.log(f"{entity}/spheres", rr.Ellipsoids3D(
+                centers=[c for c, _ in description["spheres"]],
+                half_sizes=[[r, r, r] for _, r in description["spheres"]], colors=BODY_COLOR,
+                fill_mode=rr.components.FillMode.Solid), static=True)
+        if description["capsules"]:
+            caps = description["capsules"]
+            rec.log(f"{entity}/capsules", rr.Capsules3D(
+                lengths=[float(np.linalg.norm(b - a)) for a, b, _ in caps], radii=[r for *_, r in caps],
+                translations=[a for a, _, _ in caps], quaternions=[_quaternion_z_to(b - a) for a, b, _ in caps],
+                colors=BODY_COLOR, fill_mode=rr.components.FillMode.Solid), static=True)
+        for k, (point, normal) in enumerate(description["planes"]):
+            u = np.cross(normal, [1.0, 0.0, 0.0] if abs(normal[0]) < 0.9 else [0.0, 1.0, 0.0])
+            u /= np.linalg.norm(u)
+            w = np.cross(normal, u)
+            corners = np.array([point + 2 * (su * u + sw * w) for su, sw in ((-1, -1), (1, -1), (1, 1), (-1, 1))])
+            rec.log(f"{entity}/planes/{k}", rr.Mesh3D(vertex_positions=corners.astype(np.float32),
+                                                      triangle_indices=np.array([[0, 1, 2], [0, 2, 3]], np.uint32),
+                                                      albedo_factor=FLOOR_COLOR), static=True)
 
     def log_frame(self, entity: str, scene, frame: int, measurement, steps_per_s: float | None = None) -> None:
         """Log the cloth's state at `frame` (positions, normals, moving pins) and its scalar metrics."""

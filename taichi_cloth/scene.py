@@ -16,6 +16,7 @@ import numpy as np
 import taichi as ti
 
 from .builder import ClothData
+from .colliders import build_colliders
 from .diagnostics import Diagnostics, Measurement
 from .errors import BlowUpError, SceneError
 from .forces import ForceModel
@@ -100,6 +101,8 @@ class Scene:
     pins:               PinSpec list (fixed pins cost nothing per step; moving ones build a PinDriver)
     wind:               None or Wind keyword arguments (velocity [m/s], coefficient, gust, gust_frequency)
     stretch_limit:      None or StretchLimit keyword arguments (max_strain, iterations)
+    colliders:          collider specs (dicts, see taichi_cloth.colliders) or collision objects
+                        (MeshCollider, PrimitiveColliders); resolved after every step, in order
     fps:                frames per simulated second for run() and recording; substeps = round(1/(fps dt))
     step_guard:         what to do when an explicit integrator's dt exceeds its stable bound: warn/refuse/off
     max_speed [m/s], max_strain [-]: beyond these (or at any NaN) a run is declared blown up
@@ -108,8 +111,8 @@ class Scene:
     def __init__(self, cloth: ClothData | Model, *, name: str = "cloth", integrator: str = "approx-implicit",
                  dt: float = 1.0 / 240.0, integrator_options: dict | None = None, gravity=(0.0, -9.81, 0.0),
                  air_damping: float = 0.1, pins=(), wind: dict | None = None, stretch_limit: dict | None = None,
-                 fps: float = 60.0, precision: str = "f32", step_guard: str = "warn",
-                 max_speed: float = 200.0, max_strain: float = 10.0):
+                 colliders=(), fps: float = 60.0, precision: str = "f32", step_guard: str = "warn",
+                 max_speed: float = 200.0, max_strain: float = 10.0, base_dir=None):
         if not dt > 0 or not math.isfinite(dt):
             raise SceneError(f"dt must be a positive number of seconds, got {dt}")
         if not fps > 0:
@@ -138,6 +141,9 @@ class Scene:
         self.integrator = integrator_class(integrator)(self.model, self.state, self.forces,
                                                        **(integrator_options or {}))
         self.stretch_limit = StretchLimit(self.model, self.state, **stretch_limit) if stretch_limit else None
+        self.colliders = build_colliders(colliders, base_dir) if colliders else []
+        for c in self.colliders:
+            c.attach(self.state.x, self.state.v, self.model.inv_mass, self.model.n_particles)
         self.diagnostics = Diagnostics(self.model, self.state, self.forces)
         self._normals: VertexNormals | None = None
         self.steps_taken = 0
@@ -183,12 +189,17 @@ class Scene:
 
     def _advance(self, n: int) -> None:
         dt = self.dt
+        colliders = self.colliders
         for _ in range(n):
+            for c in colliders:
+                c.begin_step()
             self.integrator.step(dt)
             if self.pins is not None:
                 self.pins.apply(self.state.t, dt)
             if self.stretch_limit is not None:
                 self.stretch_limit.apply(dt)
+            for c in colliders:
+                c.resolve(dt)
             self.steps_taken += 1
 
     def measure(self) -> Measurement:
@@ -291,6 +302,8 @@ class Scene:
         if recorder is not None:
             t0 = time.perf_counter()
             recorder.begin_cloth(entity, self, translation)
+            for k, c in enumerate(self.colliders):
+                recorder.log_collider(f"{entity}/colliders/{k}", c.describe())
             recorder.log_frame(entity, self, 0, self.measure())
             summary.wall_record += time.perf_counter() - t0
         bar = None

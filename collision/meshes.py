@@ -1,0 +1,116 @@
+"""Triangle meshes from files and arrays: validation with one clear message, optional repair, loading.
+
+Used for collision bodies and, by taichi_cloth, for cloth meshes. Vectorised numpy; runs once per mesh.
+"""
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from .errors import MeshError
+
+
+def triangle_areas(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """Areas [m^2] of triangles (T,3) int over vertices (V,3) float; shape (T,)."""
+    if len(triangles) == 0:
+        return np.zeros(0)
+    p = vertices[triangles]
+    return 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+
+
+def edge_face_counts(triangles: np.ndarray) -> np.ndarray:
+    """How many triangles share each undirected edge; shape (E,)."""
+    half = np.sort(np.asarray(triangles, dtype=np.int64)[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    return np.unique(half, axis=0, return_counts=True)[1]
+
+
+def mesh_problems(vertices, triangles) -> dict:
+    """Counts of each defect: empty, nonfinite (vertices), out_of_range, degenerate (faces), nonmanifold (edges)."""
+    v, t = np.asarray(vertices), np.asarray(triangles)
+    out = {"empty": int(v.ndim != 2 or len(v) == 0 or t.ndim != 2 or len(t) == 0)}
+    if out["empty"]:
+        return out
+    out["nonfinite"] = int(np.count_nonzero(~np.all(np.isfinite(v), axis=1)))
+    out["out_of_range"] = int(np.count_nonzero((t < 0) | (t >= len(v))))
+    if out["nonfinite"] or out["out_of_range"]:
+        return out
+    repeated = (t[:, 0] == t[:, 1]) | (t[:, 1] == t[:, 2]) | (t[:, 2] == t[:, 0])
+    scale = float(np.ptp(v, axis=0).max()) if len(v) > 1 else 1.0
+    out["degenerate"] = int(np.count_nonzero(repeated | (triangle_areas(v, t) <= 1e-12 * max(scale, 1e-12) ** 2)))
+    out["nonmanifold"] = int(np.count_nonzero(edge_face_counts(t) > 2))
+    return out
+
+
+def validate_triangle_mesh(vertices, triangles, source: str = "mesh") -> None:
+    """Raise MeshError naming `source` and the first defect found (see mesh_problems)."""
+    v, t = np.asarray(vertices), np.asarray(triangles)
+    p = mesh_problems(v, t)
+    if p["empty"]:
+        what = "vertices" if v.ndim != 2 or len(v) == 0 else "triangles"
+        raise MeshError(f"{source}: the mesh has no {what}")
+    if p["nonfinite"]:
+        raise MeshError(f"{source}: {p['nonfinite']} vertices have NaN or infinite coordinates")
+    if p["out_of_range"]:
+        raise MeshError(f"{source}: triangle indices out of range 0..{len(v) - 1}")
+    if p["degenerate"]:
+        raise MeshError(f"{source}: {p['degenerate']} degenerate triangles (zero area or a repeated vertex)")
+    if p["nonmanifold"]:
+        raise MeshError(f"{source}: non-manifold: {p['nonmanifold']} edges are shared by more than two triangles")
+
+
+def repair_triangle_mesh(vertices, triangles, source: str = "mesh"):
+    """Drop what can be dropped safely: faces touching non-finite vertices, degenerate faces, unused vertices.
+    Warns saying what was done; returns (vertices, triangles). Non-manifold edges are not repairable here."""
+    v = np.asarray(vertices, dtype=np.float64)
+    t = np.asarray(triangles, dtype=np.int64)
+    if len(v) == 0 or len(t) == 0:
+        raise MeshError(f"{source}: the mesh is empty")
+    done = []
+    finite = np.all(np.isfinite(v), axis=1)
+    bad = ~np.all(finite[t], axis=1)
+    if bad.any():
+        done.append(f"dropped {int(bad.sum())} faces on NaN/inf vertices")
+        t = t[~bad]
+    scale = float(np.ptp(v[finite], axis=0).max()) if finite.sum() > 1 else 1.0
+    repeated = (t[:, 0] == t[:, 1]) | (t[:, 1] == t[:, 2]) | (t[:, 2] == t[:, 0])
+    degenerate = repeated | (triangle_areas(v, t) <= 1e-12 * max(scale, 1e-12) ** 2)
+    if degenerate.any():
+        done.append(f"dropped {int(degenerate.sum())} degenerate faces")
+        t = t[~degenerate]
+    used = np.unique(t)
+    if len(used) < len(v):
+        done.append(f"dropped {len(v) - len(used)} unused vertices")
+        remap = np.full(len(v), -1, np.int64)
+        remap[used] = np.arange(len(used))
+        v, t = v[used], remap[t]
+    if done:
+        warnings.warn(f"{source}: repaired: " + "; ".join(done), stacklevel=2)
+    validate_triangle_mesh(v, t, source)
+    return v, t
+
+
+def load_triangle_mesh(path: str | Path, scale: float = 1.0, translate=(0.0, 0.0, 0.0), repair: bool = False):
+    """Read a triangle mesh (OBJ, STL, PLY, GLB, OFF...) with trimesh; returns (vertices (V,3) float64 [m],
+    triangles (T,3) int64). `scale` multiplies the file's coordinates into metres, then `translate` [m] is
+    added. Duplicate vertices are merged. Defects raise MeshError, or are repaired with a warning if `repair`."""
+    import trimesh
+
+    path = Path(path)
+    if not path.is_file():
+        raise MeshError(f"{path}: no such mesh file")
+    try:
+        mesh = trimesh.load(path, force="mesh", process=False)
+    except Exception as exc:  # trimesh raises many types for unreadable files
+        raise MeshError(f"{path}: cannot read the mesh ({exc})") from None
+    v = np.asarray(mesh.vertices, dtype=np.float64)
+    t = np.asarray(mesh.faces, dtype=np.int64)
+    if len(v) and len(t) and np.all(np.isfinite(v)):
+        merged = trimesh.Trimesh(v, t, process=True, validate=False)  # merge duplicate vertices (OBJ uv seams)
+        v, t = np.asarray(merged.vertices, dtype=np.float64), np.asarray(merged.faces, dtype=np.int64)
+    v = v * float(scale) + np.asarray(translate, dtype=np.float64)
+    if repair:
+        return repair_triangle_mesh(v, t, str(path))
+    validate_triangle_mesh(v, t, str(path))
+    return v, t

@@ -1,0 +1,164 @@
+"""Analytic colliders: spheres (seed 002), capsules and planes, for fast tests and a stand-in body.
+
+Seed 002's rule for spheres: a particle collides when |S - C| <= r_sphere + r_particle and is pushed along
+(S - C) by alpha (r_sphere + r_particle - |S - C|), the pushes summed over all spheres (the norm is not
+squared; ALGORITHMS.md 0). We add what a stand-in body needs: capsules (the same rule about the closest
+point of the axis), half-space planes (floors), a segment test so a particle that passes right through a
+sphere or capsule within one step is caught at its entry, and the body response of collision.body (inward
+normal velocity removed, Coulomb friction on the rest).
+"""
+import numpy as np
+import taichi as ti
+
+
+@ti.func
+def _closest_on_segment(x, a, b):
+    ab = b - a
+    s = ti.min(ti.max((x - a).dot(ab) / ti.max(ab.dot(ab), 1e-20), 0.0), 1.0)
+    return a + s * ab
+
+
+@ti.data_oriented
+class PrimitiveColliders:
+    """spheres: list of (center (3,) [m], radius [m]); capsules: list of (a (3,), b (3,), radius); planes: list
+    of (point (3,), normal (3,)). thickness [m] is the particle radius r_p; alpha the seed's push fraction
+    (1 = fully out); friction the Coulomb coefficient. Fields hold the shapes so they can move (set_*)."""
+
+    def __init__(self, spheres=(), capsules=(), planes=(), thickness: float = 0.003, alpha: float = 1.0,
+                 friction: float = 0.3):
+        if not (spheres or capsules or planes):
+            raise ValueError("PrimitiveColliders needs at least one sphere, capsule or plane")
+        if not 0 < alpha <= 1:
+            raise ValueError(f"alpha must lie in (0, 1], got {alpha}")
+        self.thickness, self.alpha, self.friction = float(thickness), float(alpha), float(friction)
+        self.n_spheres, self.n_capsules, self.n_planes = len(spheres), len(capsules), len(planes)
+        self.sphere = ti.Vector.field(4, ti.f32, max(len(spheres), 1))       # cx, cy, cz, r
+        self.capsule_a = ti.Vector.field(4, ti.f32, max(len(capsules), 1))   # ax, ay, az, r
+        self.capsule_b = ti.Vector.field(3, ti.f32, max(len(capsules), 1))
+        self.plane = ti.Vector.field(6, ti.f32, max(len(planes), 1))         # point, unit normal
+        self.set_spheres(spheres)
+        self.set_capsules(capsules)
+        self.set_planes(planes)
+        self._attached = False
+
+    def set_spheres(self, spheres) -> None:
+        self.spheres_np = [(np.asarray(c, float), float(r)) for c, r in spheres]
+        for k, (c, r) in enumerate(self.spheres_np):
+            if not r > 0:
+                raise ValueError(f"sphere {k}: radius must be > 0 m, got {r}")
+            self.sphere[k] = [*c, r]
+
+    def set_capsules(self, capsules) -> None:
+        self.capsules_np = [(np.asarray(a, float), np.asarray(b, float), float(r)) for a, b, r in capsules]
+        for k, (a, b, r) in enumerate(self.capsules_np):
+            if not r > 0:
+                raise ValueError(f"capsule {k}: radius must be > 0 m, got {r}")
+            self.capsule_a[k] = [*a, r]
+            self.capsule_b[k] = b.tolist()
+
+    def set_planes(self, planes) -> None:
+        self.planes_np = []
+        for k, (p, n) in enumerate(planes):
+            n = np.asarray(n, float)
+            if not np.linalg.norm(n) > 0:
+                raise ValueError(f"plane {k}: the normal must be non-zero")
+            n = n / np.linalg.norm(n)
+            self.planes_np.append((np.asarray(p, float), n))
+            self.plane[k] = [*p, *n]
+
+    def attach(self, x, v, inv_mass, n_particles) -> None:
+        self.x, self.v, self.inv_mass, self.n_particles = x, v, inv_mass, n_particles
+        self.x_start = ti.Vector.field(3, x.dtype, x.shape[0])
+        self._attached = True
+
+    def begin_step(self) -> None:
+        self._copy_start()
+
+    @ti.kernel
+    def _copy_start(self):
+        for i in range(self.n_particles[None]):
+            self.x_start[i] = self.x[i]
+
+    def resolve(self, dt: float) -> None:
+        self._resolve()
+
+    @ti.func
+    def _entry(self, p, q, c, r):
+        """If segment p -> q passes through the ball (c, r) with both ends outside, the entry point; else q."""
+        d = q - p
+        out = q
+        dd = d.dot(d)
+        if dd > 0 and (p - c).norm() > r and (q - c).norm() > r:
+            s = ti.min(ti.max((c - p).dot(d) / dd, 0.0), 1.0)
+            if (p + s * d - c).norm() < r:
+                f = p - c
+                bq = f.dot(d)
+                disc = bq * bq - dd * (f.dot(f) - r * r)
+                out = p + ti.max((-bq - ti.sqrt(ti.max(disc, 0.0))) / dd, 0.0) * d
+        return out
+
+    @ti.kernel
+    def _resolve(self):
+        for i in range(self.n_particles[None]):
+            if self.inv_mass[i] != 0:
+                p = ti.cast(self.x_start[i], ti.f32)
+                q = ti.cast(self.x[i], ti.f32)
+                rp = ti.cast(self.thickness, ti.f32)
+                for k in range(self.n_spheres):  # tunnelling first: stop at the entry point
+                    q = self._entry(p, q, self.sphere[k].xyz, self.sphere[k].w + rp)
+                for k in range(self.n_capsules):
+                    a = self.capsule_a[k].xyz
+                    axis = _closest_on_segment(0.5 * (p + q), a, self.capsule_b[k])
+                    q = self._entry(p, q, axis, self.capsule_a[k].w + rp)
+                push = ti.Vector.zero(ti.f32, 3)
+                for k in range(self.n_spheres):  # seed 002: pushes summed over all spheres
+                    c = self.sphere[k].xyz
+                    reach = self.sphere[k].w + rp
+                    d = q - c
+                    dist = d.norm()
+                    if dist <= reach:
+                        push += self.alpha * (reach - dist) * d.normalized(1e-20)
+                for k in range(self.n_capsules):
+                    c = _closest_on_segment(q, self.capsule_a[k].xyz, self.capsule_b[k])
+                    reach = self.capsule_a[k].w + rp
+                    d = q - c
+                    dist = d.norm()
+                    if dist <= reach:
+                        push += self.alpha * (reach - dist) * d.normalized(1e-20)
+                for k in range(self.n_planes):
+                    pt = ti.Vector([self.plane[k][0], self.plane[k][1], self.plane[k][2]])
+                    nrm = ti.Vector([self.plane[k][3], self.plane[k][4], self.plane[k][5]])
+                    dist = (q + push - pt).dot(nrm)
+                    if dist < rp:
+                        push += (rp - dist) * nrm
+                moved = (q + push) - ti.cast(self.x[i], ti.f32)
+                if push.norm() > 0 or moved.norm() > 0:
+                    self.x[i] = ti.cast(q + push, self.x.dtype)
+                    nrm = push.normalized(1e-20)
+                    vel = self.v[i]
+                    vn = vel.dot(ti.cast(nrm, self.x.dtype))
+                    if vn < 0:
+                        vt = vel - vn * ti.cast(nrm, self.x.dtype)
+                        vt_len = vt.norm()
+                        scale = 0.0
+                        if vt_len > 0:
+                            scale = ti.max(0.0, 1.0 - self.friction * (-vn) / vt_len)
+                        self.v[i] = scale * vt
+
+    def signed_distance(self, points) -> np.ndarray:
+        """Signed distance [m] of points (N,3) to the union of the shapes, negative inside."""
+        x = np.asarray(points, dtype=np.float64)
+        d = np.full(len(x), np.inf)
+        for c, r in self.spheres_np:
+            d = np.minimum(d, np.linalg.norm(x - c, axis=1) - r)
+        for a, b, r in self.capsules_np:
+            ab = b - a
+            s = np.clip((x - a) @ ab / max(ab @ ab, 1e-20), 0, 1)
+            d = np.minimum(d, np.linalg.norm(x - (a + s[:, None] * ab), axis=1) - r)
+        for p, n in self.planes_np:
+            d = np.minimum(d, (x - p) @ n)
+        return d
+
+    def describe(self) -> dict:
+        return {"kind": "primitives", "spheres": self.spheres_np, "capsules": self.capsules_np,
+                "planes": self.planes_np}

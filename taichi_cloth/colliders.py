@@ -1,0 +1,63 @@
+"""Scene glue for collision: collider specs (scene-file tables or dicts) -> collision package objects.
+
+Spec keys (SI units):
+  {"type": "sphere",  "center": [x, y, z], "radius": r}
+  {"type": "capsule", "a": [x, y, z], "b": [x, y, z], "radius": r}
+  {"type": "plane",   "point": [x, y, z], "normal": [nx, ny, nz]}
+  {"type": "mesh",    "path": "body.obj" | "mannequin", "scale": 1.0, "translate": [0, 0, 0],
+                      "cell_size": None (1.5 x mean edge), "mode": "fuzzy" | "exact"}
+  every type also takes "thickness" [m] (default 0.003) and "friction" (default 0.3).
+Analytic shapes with the same thickness and friction share one PrimitiveColliders (one kernel).
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+from collision import MeshCollider, PrimitiveColliders, load_triangle_mesh
+
+DEFAULT_THICKNESS = 0.003  # m
+DEFAULT_FRICTION = 0.3
+
+
+def body_mesh(path: str, scale: float = 1.0, translate=(0.0, 0.0, 0.0), base_dir: Path | None = None):
+    """(vertices [m], triangles) of a body: "mannequin" for the shipped CC0 body, else a mesh file."""
+    import numpy as np
+
+    if path == "mannequin":
+        from collision.mannequin import load_mannequin
+
+        m = load_mannequin()
+        return m.vertices * scale + np.asarray(translate, dtype=np.float64), m.triangles
+    p = Path(path)
+    if not p.is_absolute() and base_dir is not None:
+        p = base_dir / p
+    return load_triangle_mesh(p, scale, translate)
+
+
+def build_colliders(specs, base_dir: Path | None = None) -> list:
+    """Collider objects for a list of spec dicts (see the module docstring); objects pass through."""
+    out, groups = [], {}
+    for spec in specs:
+        if not isinstance(spec, dict):
+            out.append(spec)
+            continue
+        kind = spec["type"]
+        thickness = spec.get("thickness", DEFAULT_THICKNESS)
+        friction = spec.get("friction", DEFAULT_FRICTION)
+        if kind == "mesh":
+            v, t = body_mesh(spec["path"], spec.get("scale", 1.0), spec.get("translate", (0.0, 0.0, 0.0)), base_dir)
+            out.append(MeshCollider(v, t, thickness=thickness, friction=friction, cell_size=spec.get("cell_size"),
+                                    mode=spec.get("mode", "fuzzy"), source=str(spec["path"])))
+        elif kind in ("sphere", "capsule", "plane"):
+            g = groups.setdefault((thickness, friction), {"sphere": [], "capsule": [], "plane": []})
+            if kind == "sphere":
+                g["sphere"].append((spec["center"], spec["radius"]))
+            elif kind == "capsule":
+                g["capsule"].append((spec["a"], spec["b"], spec["radius"]))
+            else:
+                g["plane"].append((spec["point"], spec["normal"]))
+        else:
+            raise ValueError(f"unknown collider type {kind!r} (sphere, capsule, plane, mesh)")
+    for (thickness, friction), g in groups.items():
+        out.append(PrimitiveColliders(g["sphere"], g["capsule"], g["plane"], thickness=thickness, friction=friction))
+    return out
