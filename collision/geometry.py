@@ -50,11 +50,62 @@ def inside_triangle(x, a, b, c, n):
 
 
 @ti.func
-def collision_possibility(motion, n):
-    """The fuzzy collision possibility mu of seed 000 (our reconstruction): how directly the motion heads into
-    the face, clamp(-motion . n / |motion|, 0, 1); 0 when moving along or away from it, or not moving."""
+def collision_possibility(start_height, motion, n, reach_gate: ti.template()):
+    """The fuzzy collision possibility mu of seed 000 (our reconstruction; the seed's formula is garbled):
+    how directly the motion heads into the face, clamp(-motion . n / |motion|, 0, 1), and 0 when the particle
+    moves along or away from the face, does not move, or cannot reach the face's plane this step
+    (start_height = (p - a) . n above it, and the motion descends less than that) when reach_gate is set."""
     length = motion.norm()
+    descent = -motion.dot(n)
     mu = 0.0
-    if length > 1e-12:
-        mu = ti.min(ti.max(-motion.dot(n) / length, 0.0), 1.0)
+    if length > 1e-12 and descent > 0 and (not ti.static(reach_gate) or descent >= start_height):
+        mu = ti.min(descent / length, 1.0)
     return mu
+
+
+@ti.func
+def closest_point_on_triangle(p, a, b, c):
+    """The point of triangle (a, b, c) closest to p (Ericson, Real-Time Collision Detection, 5.1.5)."""
+    ab = b - a
+    ac = c - a
+    ap = p - a
+    d1 = ab.dot(ap)
+    d2 = ac.dot(ap)
+    out = a
+    if not (d1 <= 0.0 and d2 <= 0.0):
+        bp = p - b
+        d3 = ab.dot(bp)
+        d4 = ac.dot(bp)
+        cp = p - c
+        d5 = ab.dot(cp)
+        d6 = ac.dot(cp)
+        vc = d1 * d4 - d3 * d2
+        vb = d5 * d2 - d1 * d6
+        va = d3 * d6 - d5 * d4
+        if d3 >= 0.0 and d4 <= d3:
+            out = b
+        elif vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
+            out = a + d1 / (d1 - d3) * ab
+        elif d6 >= 0.0 and d5 <= d6:
+            out = c
+        elif vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
+            out = a + d2 / (d2 - d6) * ac
+        elif va <= 0.0 and (d4 - d3) >= 0.0 and (d5 - d6) >= 0.0:
+            out = b + (d4 - d3) / ((d4 - d3) + (d5 - d6)) * (c - b)
+        else:
+            den = 1.0 / (va + vb + vc)
+            out = a + ab * (vb * den) + ac * (vc * den)
+    return out
+
+
+@ti.func
+def solid_angle(p, a, b, c):
+    """Signed solid angle of triangle (a, b, c) seen from p (Van Oosterom and Strackee 1983); summed over a
+    closed outward-wound mesh and divided by 4 pi it is the winding number: 1 inside, 0 outside."""
+    ra = a - p
+    rb = b - p
+    rc = c - p
+    la, lb, lc = ra.norm(), rb.norm(), rc.norm()
+    num = ra.dot(rb.cross(rc))
+    den = la * lb * lc + ra.dot(rb) * lc + ra.dot(rc) * lb + rb.dot(rc) * la
+    return 2.0 * ti.atan2(num, den)

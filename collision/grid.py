@@ -1,10 +1,12 @@
 """A uniform voxel grid over a triangle mesh, built in Taichi kernels (count, prefix sum, fill).
 
 Each triangle is binned into every cell its bounding box, inflated by `pad`, overlaps (ALGORITHMS.md 3:
-Teschner 2003 finds the best cell size near the mean primitive size). The grid covers the mesh's bounds
-plus `margin`; its cell counts are fixed at construction, so rebuilding after the mesh moves or morphs
-refills the same fields (no reallocation, no recompile) as long as the mesh stays within the allocated
-extent.
+Teschner 2003 finds the best cell size near the mean primitive size). Dense mode covers the mesh's bounds
+plus `margin` with a fixed number of cells, so rebuilding after the mesh moves or morphs refills the same
+fields (no reallocation, no recompile) while the mesh stays within the allocated extent. Hashed mode
+(Teschner et al. 2003: hash(i,j,k) = (73856093 i ^ 19349663 j ^ 83492791 k) mod a prime) has no bounds, for a
+mesh that travels (the cloth itself, for self-collision); cells sharing a bucket only add candidates. With
+`vertices_start` the boxes span each triangle's start and end positions (swept over a step).
 """
 import math
 
@@ -22,17 +24,26 @@ class VoxelGrid:
     """
 
     def __init__(self, vertices, triangles, n_triangles, cell_size: float, pad: float, margin: float,
-                 vertices_np: np.ndarray, triangles_np: np.ndarray, grow: float = 1.25):
+                 vertices_np: np.ndarray, triangles_np: np.ndarray, grow: float = 1.25, hashed: bool = False,
+                 vertices_start=None):
         if not cell_size > 0:
             raise ValueError(f"voxel cell size must be > 0 m, got {cell_size}")
         self.vertices, self.triangles, self.n_triangles = vertices, triangles, n_triangles
-        self.cell_size, self.pad, self.margin = float(cell_size), float(pad), float(margin)
-        lo, hi = vertices_np.min(0) - margin, vertices_np.max(0) + margin
-        self.dims = tuple(int(math.ceil(grow * (h - l) / cell_size)) + 2 for l, h in zip(lo, hi))
-        n_cells = self.dims[0] * self.dims[1] * self.dims[2]
-        self.n_cells = n_cells
+        self.vertices_start = vertices_start
+        self.swept = vertices_start is not None
+        self.cell_size, self.pad, self.margin, self.hashed = float(cell_size), float(pad), float(margin), hashed
         pairs = self._count_pairs_np(vertices_np, triangles_np)
-        self.pair_capacity = max(int(grow * grow * pairs) + 64, 64)
+        if hashed:
+            self.dims = (0, 0, 0)
+            self.n_cells = _prime_at_least(2 * int(grow * grow * pairs) + 1031)
+        else:
+            lo, hi = vertices_np.min(0) - margin, vertices_np.max(0) + margin
+            self.dims = tuple(int(math.ceil(grow * (h - l) / cell_size)) + 2 for l, h in zip(lo, hi))
+            self.n_cells = self.dims[0] * self.dims[1] * self.dims[2]
+        n_cells = self.n_cells
+        # a swept or hashed mesh moves: leave room for its boxes to grow (cloth folding, moving fast)
+        room = 4.0 if (hashed or self.swept) else grow * grow
+        self.pair_capacity = max(int(room * pairs) + 64, 64)
         self.origin = ti.Vector.field(3, ti.f32, ())
         self.cell_count = ti.field(ti.i32, n_cells)
         self.cell_start = ti.field(ti.i32, n_cells + 1)
@@ -49,12 +60,13 @@ class VoxelGrid:
     def build(self, vertices_np: np.ndarray | None = None) -> int:
         """(Re)bin every triangle; call after the mesh moved. The grid is re-centred on the mesh bounds (from
         `vertices_np` if given, else read back). Returns the number of (triangle, cell) pairs."""
-        v = self.vertices.to_numpy() if vertices_np is None else vertices_np
-        centre = 0.5 * (v.min(0) + v.max(0))
-        extent = np.array(self.dims) * self.cell_size
-        if np.any(v.max(0) - v.min(0) + 2 * self.margin > extent - 2 * self.cell_size):
-            raise ValueError("the mesh outgrew its voxel grid; build the collider again with a larger margin")
-        self.origin[None] = (centre - 0.5 * extent).tolist()
+        if not self.hashed:
+            v = self.vertices.to_numpy() if vertices_np is None else vertices_np
+            centre = 0.5 * (v.min(0) + v.max(0))
+            extent = np.array(self.dims) * self.cell_size
+            if np.any(v.max(0) - v.min(0) + 2 * self.margin > extent - 2 * self.cell_size):
+                raise ValueError("the mesh outgrew its voxel grid; build the collider again with a larger margin")
+            self.origin[None] = (centre - 0.5 * extent).tolist()
         self._count()
         total = self._scan()
         if total > self.pair_capacity:
@@ -71,20 +83,35 @@ class VoxelGrid:
 
     @ti.func
     def cell_index(self, c):
-        return (c[2] * self.dims[1] + c[1]) * self.dims[0] + c[0]
+        out = 0
+        if ti.static(self.hashed):
+            h = (c[0] * 73856093) ^ (c[1] * 19349663) ^ (c[2] * 83492791)
+            out = (h % self.n_cells + self.n_cells) % self.n_cells
+        else:
+            out = (c[2] * self.dims[1] + c[1]) * self.dims[0] + c[0]
+        return out
 
     @ti.func
     def clamp_range(self, lo, hi):
-        """Cell coordinate ranges covering the box [lo, hi] [m], clipped to the grid; empty when outside."""
-        cmin = ti.max(self.cell_coord(lo), 0)
-        cmax = ti.min(self.cell_coord(hi), ti.Vector([self.dims[0] - 1, self.dims[1] - 1, self.dims[2] - 1]))
+        """Cell coordinate ranges covering the box [lo, hi] [m], clipped to a dense grid (empty when outside)."""
+        cmin = self.cell_coord(lo)
+        cmax = self.cell_coord(hi)
+        if ti.static(not self.hashed):
+            cmin = ti.max(cmin, 0)
+            cmax = ti.min(cmax, ti.Vector([self.dims[0] - 1, self.dims[1] - 1, self.dims[2] - 1]))
         return cmin, cmax
 
     @ti.func
     def triangle_box(self, t):
         tri = self.triangles[t]
         a, b, c = self.vertices[tri[0]], self.vertices[tri[1]], self.vertices[tri[2]]
-        return ti.min(a, b, c) - self.pad, ti.max(a, b, c) + self.pad
+        lo = ti.min(a, b, c)
+        hi = ti.max(a, b, c)
+        if ti.static(self.swept):
+            a0, b0, c0 = self.vertices_start[tri[0]], self.vertices_start[tri[1]], self.vertices_start[tri[2]]
+            lo = ti.min(lo, a0, b0, c0)
+            hi = ti.max(hi, a0, b0, c0)
+        return ti.cast(lo, ti.f32) - self.pad, ti.cast(hi, ti.f32) + self.pad
 
     @ti.kernel
     def _count(self):
@@ -120,6 +147,7 @@ class VoxelGrid:
                 self.cell_triangles[self.cell_start[cell] + slot] = t
 
     # ------------------------------------------------------------------ host-side inspection (tests)
+    # (dense grids only)
     def triangles_in_box(self, lo, hi) -> np.ndarray:
         """Sorted unique triangle ids binned in the cells overlapping box [lo, hi] [m] (numpy, for tests)."""
         origin = self.origin.to_numpy()
@@ -134,3 +162,12 @@ class VoxelGrid:
         if len(cells) == 0:
             return np.zeros(0, np.int64)
         return np.unique(np.concatenate([tris[start[c]:start[c + 1]] for c in cells]))
+
+
+def _prime_at_least(n: int) -> int:
+    def is_prime(k):
+        return k > 1 and all(k % d for d in range(2, int(k ** 0.5) + 1))
+
+    while not is_prime(n):
+        n += 1
+    return n

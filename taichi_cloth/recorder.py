@@ -62,6 +62,8 @@ class Recorder:
     def log_collider(self, entity: str, description: dict) -> None:
         """A collider, once, as static data: a body mesh, spheres, capsules and planes (a 4 m square)."""
         rec = self.stream
+        if description["kind"] == "self":
+            return
         if description["kind"] == "mesh":
             rec.log(entity, rr.Mesh3D(vertex_positions=np.asarray(description["vertices"], np.float32),
                                       triangle_indices=np.asarray(description["triangles"], np.uint32),

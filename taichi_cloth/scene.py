@@ -103,6 +103,8 @@ class Scene:
     stretch_limit:      None or StretchLimit keyword arguments (max_strain, iterations)
     colliders:          collider specs (dicts, see taichi_cloth.colliders) or collision objects
                         (MeshCollider, PrimitiveColliders); resolved after every step, in order
+    self_collision:     False, True, or SelfCollision keyword arguments (thickness, friction): the cloth
+                        against its own triangles, resolved before the colliders
     fps:                frames per simulated second for run() and recording; substeps = round(1/(fps dt))
     step_guard:         what to do when an explicit integrator's dt exceeds its stable bound: warn/refuse/off
     max_speed [m/s], max_strain [-]: beyond these (or at any NaN) a run is declared blown up
@@ -111,7 +113,7 @@ class Scene:
     def __init__(self, cloth: ClothData | Model, *, name: str = "cloth", integrator: str = "approx-implicit",
                  dt: float = 1.0 / 240.0, integrator_options: dict | None = None, gravity=(0.0, -9.81, 0.0),
                  air_damping: float = 0.1, pins=(), wind: dict | None = None, stretch_limit: dict | None = None,
-                 colliders=(), fps: float = 60.0, precision: str = "f32", step_guard: str = "warn",
+                 colliders=(), self_collision=False, fps: float = 60.0, precision: str = "f32", step_guard: str = "warn",
                  max_speed: float = 200.0, max_strain: float = 10.0, base_dir=None):
         if not dt > 0 or not math.isfinite(dt):
             raise SceneError(f"dt must be a positive number of seconds, got {dt}")
@@ -142,6 +144,11 @@ class Scene:
                                                        **(integrator_options or {}))
         self.stretch_limit = StretchLimit(self.model, self.state, **stretch_limit) if stretch_limit else None
         self.colliders = build_colliders(colliders, base_dir) if colliders else []
+        if self_collision:  # first, so that the body colliders have the last word on every position
+            from collision.self_collision import SelfCollision
+
+            options = self_collision if isinstance(self_collision, dict) else {}
+            self.colliders.insert(0, SelfCollision(self.model.data.triangles, self.model.data.positions, **options))
         for c in self.colliders:
             c.attach(self.state.x, self.state.v, self.model.inv_mass, self.model.n_particles)
         self.diagnostics = Diagnostics(self.model, self.state, self.forces)

@@ -9,6 +9,7 @@ and a component whose table is absent is never built. The schema (units in brack
     precision = "f32"             # "f32" or "f64" fields
     gravity = [0.0, -9.81, 0.0]   # [m/s^2]
     air_damping = 0.1             # drag rate [1/s]
+    self_collision = false        # the cloth against its own triangles (costs a grid rebuild per step)
 
     [cloth]                       # exactly one source: [cloth.grid] or [cloth.mesh]
     material = "cotton"           # preset name, or a [cloth.material] table
@@ -33,6 +34,9 @@ and a component whose table is absent is never built. The schema (units in brack
 
     [wind]                        # velocity [m/s], coefficient [kg/(m^2 s)], gust (relative), gust_frequency [Hz]
     [stretch_limit]               # max_strain (0.1 = 10 %), iterations (max passes), tolerance, omega
+    [[colliders]]                 # type = "sphere" (center, radius) | "capsule" (a, b, radius) | "plane" (point,
+                                  # normal) | "mesh" (path: a file or "mannequin", scale, translate, cell_size,
+                                  # mode = "fuzzy" | "exact"); all: thickness [m] = 0.003, friction = 0.3
     [output]                      # dir = "out", record = true, mesh = true, record_every = 1
 """
 from __future__ import annotations
@@ -128,6 +132,7 @@ SCHEMA = Table({
     "precision": Field("str", "f32", choices=("f32", "f64")),
     "gravity": Field("vec3", [0.0, -9.81, 0.0]),
     "air_damping": Field("number", 0.1, _nonneg),
+    "self_collision": Field("bool", False),
     "cloth": Table({
         "material": MATERIAL_TABLE,
         "grid": Table({"size": Field("vec2", check=lambda v: None if min(v) > 0 else "must be positive"),
@@ -149,6 +154,14 @@ SCHEMA = Table({
                             "iterations": Field("int", 100, _at_least(1)),
                             "tolerance": Field("number", 1e-3, _nonneg),
                             "omega": Field("number", 1.5, lambda v: None if 0 < v < 2 else "must lie in (0, 2)")}),
+    "colliders": Array(Table({
+        "type": Field("str", choices=("sphere", "capsule", "plane", "mesh")),
+        "center": Field("vec3", None), "radius": Field("number", None, _positive),
+        "a": Field("vec3", None), "b": Field("vec3", None),
+        "point": Field("vec3", None), "normal": Field("vec3", None),
+        "path": Field("str", None), "scale": Field("number", None, _positive), "translate": Field("vec3", None),
+        "cell_size": Field("number", None, _positive), "mode": Field("str", None, choices=("fuzzy", "exact")),
+        "thickness": Field("number", 0.003, _positive), "friction": Field("number", 0.3, _nonneg)})),
     "output": Table({"dir": Field("str", "out"), "record": Field("bool", True), "mesh": Field("bool", True),
                      "record_every": Field("int", 1, _at_least(1))}, always=True),
 })
@@ -277,7 +290,29 @@ def parse_scene(source: str | Path | dict, base_dir: Path | None = None, label: 
             v.fail(f"[[pins]] #{k + 1}", "selects nothing: give indices, near or box")
         if pin["keyframes"] is not None and any(b[0] <= a[0] for a, b in zip(pin["keyframes"], pin["keyframes"][1:])):
             v.fail(f"[[pins]] #{k + 1} keyframes", "times must increase strictly")
+    for k, col in enumerate(cfg["colliders"]):
+        _check_collider(v, col, f"[[colliders]] #{k + 1}")
     return cfg
+
+
+#: keys each collider type needs, and the optional ones it accepts (thickness and friction: every type)
+COLLIDER_KEYS = {"sphere": ({"center", "radius"}, set()), "capsule": ({"a", "b", "radius"}, set()),
+                 "plane": ({"point", "normal"}, set()),
+                 "mesh": ({"path"}, {"scale", "translate", "cell_size", "mode"})}
+
+
+def _check_collider(v: "_Validator", col: dict, where: str) -> None:
+    required, optional = COLLIDER_KEYS[col["type"]]
+    given = {k for k, val in col.items() if val is not None} - {"type", "thickness", "friction"}
+    for key in sorted(required - given):
+        v.fail(where, f"a {col['type']} collider needs {key!r}")
+    for key in sorted(given - required - optional):
+        v.fail(where, f"{key!r} is not a {col['type']} collider key (it takes {', '.join(sorted(required | optional))},"
+                      " thickness, friction)")
+    if col["type"] == "plane" and not any(col["normal"]):
+        v.fail(f"{where} normal", "must be non-zero")
+    for key in [k for k, val in list(col.items()) if val is None]:
+        del col[key]
 
 
 def _check_integrator_options(v: _Validator, integ: dict) -> None:
@@ -322,8 +357,9 @@ def build_scene(cfg: dict) -> Scene:
     try:
         return Scene(data, name=cfg["name"], integrator=name, dt=dt, integrator_options=integ,
                      gravity=cfg["gravity"], air_damping=cfg["air_damping"], pins=pins, wind=cfg.get("wind"),
-                     stretch_limit=cfg.get("stretch_limit"), fps=cfg["fps"], precision=cfg["precision"],
-                     step_guard=guard)
+                     stretch_limit=cfg.get("stretch_limit"), colliders=cfg["colliders"],
+                     self_collision=cfg["self_collision"], fps=cfg["fps"],
+                     precision=cfg["precision"], step_guard=guard, base_dir=cfg["_base_dir"])
     except SceneError as exc:
         raise SceneError(f"{label}: {exc}") from None
     except ValueError as exc:  # a component refused its parameters
