@@ -6,17 +6,17 @@ mu = clamp(-(q - p).n / |q - p|, 0, 1) (ALGORITHMS.md 3), set to 0 when the moti
 this step; triangles it moves along or away from, or cannot reach (mu = 0), are never crossing-tested. The rest are tested with the seed 004 eq. (15) segment test:
   mode "fuzzy" (the seed's): in descending mu, accept the first hit;
   mode "exact":              test every mu > 0 candidate and take the earliest hit.
-Whatever mu is, a proximity test keeps resting contact: a particle within the thickness of a face whose
-projection lies inside it is pushed out to the thickness. Response: the end point goes to the thickness
-above the contact plane, the inward normal velocity is removed (restitution 0) and Coulomb friction scales
-the tangential velocity (Bridson et al. 2002). Counters record the crossing tests done and the tests that
+Whatever mu is, a proximity test keeps resting contact: a particle closer than the thickness to its nearest
+candidate face (closest point on the triangle, so edges and vertices count) is pushed away from that point
+to the thickness; only a point projecting into a face can be found behind it. A crossing puts the end point at the thickness above the crossed face's plane. Then the
+inward normal velocity is removed (restitution 0) and Coulomb friction scales the tangential velocity
+(Bridson et al. 2002). Counters record the crossing tests done and the tests that
 testing every candidate would have cost.
 """
 import numpy as np
 import taichi as ti
 
-from .geometry import (closest_point_on_triangle, collision_possibility, inside_triangle, segment_triangle,
-                       solid_angle)
+from .geometry import closest_point_on_triangle, collision_possibility, inside_triangle, segment_triangle, solid_angle
 from .grid import VoxelGrid
 from .meshes import validate_triangle_mesh
 
@@ -36,14 +36,16 @@ class MeshCollider:
     "fuzzy" or "exact"; max_candidates: per-particle candidate list length (a particle with more has its cells
     scanned unranked instead, and counted as overflows); passes: detection passes per step (a corrected particle
     is checked again); reach_gate: also give mu = 0 to faces whose plane the motion cannot reach this step (off:
-    the direction alone decides, for measuring what the gate saves).
+    the direction alone decides, for measuring what the gate saves); repulsion: None, or Repulsion keyword
+    arguments (stiffness, distance, max_force) to add seed 004's repulsion force.
 
     Fields: vertices (V,) vec3 f32, triangles (T,) ivec3, normals (T,) unit vec3 f32, counters (6,) i64.
     """
 
     def __init__(self, vertices, triangles, thickness: float = 0.003, friction: float = 0.3,
                  cell_size: float | None = None, max_step: float = 0.05, mode: str = "fuzzy",
-                 max_candidates: int = 256, passes: int = 2, reach_gate: bool = True, source: str = "body"):
+                 max_candidates: int = 256, passes: int = 2, reach_gate: bool = True, repulsion: dict | None = None,
+                 source: str = "body"):
         v = np.asarray(vertices, dtype=np.float64)
         t = np.asarray(triangles, dtype=np.int64)
         validate_triangle_mesh(v, t, source)
@@ -76,6 +78,7 @@ class MeshCollider:
                               triangles_np=t)
         self.vertices_np = v
         self._attached = False
+        self.repulsion = Repulsion(self, **repulsion) if repulsion else None
 
     # ------------------------------------------------------------------ body motion
     def set_vertices(self, vertices) -> None:
@@ -96,10 +99,13 @@ class MeshCollider:
             self.normals[t] = (self.vertices[c[1]] - a).cross(self.vertices[c[2]] - a).normalized(1e-20)
 
     # ------------------------------------------------------------------ the cloth side
-    def attach(self, x, v, inv_mass, n_particles) -> None:
+    def attach(self, x, v, inv_mass, n_particles, contact_normal=None) -> None:
         """Bind the cloth: x, v (P,) vec3 fields [m, m/s], inv_mass (P,) [1/kg] (0 = pinned: never moved),
         n_particles a 0-d i32 field. Allocates the per-particle scratch (start positions, candidates)."""
         self.x, self.v, self.inv_mass, self.n_particles = x, v, inv_mass, n_particles
+        # optional (P,) vec3 field: the unit normal of each contact made, for the implicit integrators
+        self.contact_normal = contact_normal
+        self.records_contacts = contact_normal is not None
         P = x.shape[0]
         self.x_start = ti.Vector.field(3, x.dtype, P)
         self.cand = ti.field(ti.i32, (P, self.max_candidates))
@@ -158,13 +164,14 @@ class MeshCollider:
     @ti.func
     def _scan_all(self, p, q, reach):
         """Fallback when a candidate list overflowed: every triangle of the touched cells, unranked (duplicates
-        across cells are tested again). Returns (crossed triangle or -1, contact triangle or -1, its signed
-        distance, crossing tests, cell entries scanned)."""
+        across cells are tested again). Returns (crossed triangle or -1, contact triangle or -1, its signed gap,
+        push direction, crossing tests, cell entries scanned)."""
         tau = ti.cast(self.thickness, self.x.dtype)
         cmin, cmax = self.grid.clamp_range(ti.cast(ti.min(p, q) - tau, ti.f32), ti.cast(ti.max(p, q) + tau, ti.f32))
         pf = ti.cast(p, ti.f32)
         qf = ti.cast(q, ti.f32)
-        hit, best_t, contact, best_d, tests, scanned = -1, 2.0, -1, ti.cast(self.thickness, ti.f32), 0, 0
+        hit, best_t, tests, scanned = -1, 2.0, 0, 0
+        contact, best_gap, best_dir = -1, ti.cast(1e30, ti.f32), ti.Vector.zero(ti.f32, 3)
         for a, b, c in ti.ndrange((cmin[0], cmax[0] + 1), (cmin[1], cmax[1] + 1), (cmin[2], cmax[2] + 1)):
             cell = self.grid.cell_index(ti.Vector([a, b, c]))
             for e in range(self.grid.cell_start[cell], self.grid.cell_start[cell + 1]):
@@ -177,10 +184,8 @@ class MeshCollider:
                     tests += 1
                     if crossed and s < best_t:
                         hit, best_t = t, s
-                d = (qf - v0).dot(nrm)
-                if d < best_d and d > -reach and inside_triangle(qf, v0, v1, v2, nrm):
-                    contact, best_d = t, d
-        return hit, contact, best_d, tests, scanned
+                contact, best_gap, best_dir = self._proximity(t, qf, reach, contact, best_gap, best_dir)
+        return hit, contact, best_gap, best_dir, tests, scanned
 
     @ti.func
     def _corners(self, t):
@@ -225,20 +230,36 @@ class MeshCollider:
         return best, tests
 
     @ti.func
+    def _proximity(self, t, qf, reach, best, best_gap, best_dir):
+        """Update the closest contact with triangle t. Its closest point c to q gives the gap |q - c| and the push
+        direction (q - c) / |q - c|. Only a point projecting into the face's interior can be behind it (negative
+        gap, pushed along the face normal); an edge or vertex closest point counts as outside, since crossings
+        into the body are caught by the segment test (a point behind a face's plane near a convex edge is
+        usually in front of the neighbouring face)."""
+        v0, v1, v2 = self._corners(t)
+        nrm = self.normals[t]
+        gap = ti.cast(0.0, ti.f32)
+        direction = nrm
+        if inside_triangle(qf, v0, v1, v2, nrm):
+            gap = (qf - v0).dot(nrm)
+        else:
+            offset = qf - closest_point_on_triangle(qf, v0, v1, v2)
+            gap = offset.norm()
+            if gap > 1e-9:
+                direction = offset / gap
+        if gap < ti.cast(self.thickness, ti.f32) and gap > -reach and ti.abs(gap) < ti.abs(best_gap):
+            best, best_gap, best_dir = t, gap, direction
+        return best, best_gap, best_dir
+
+    @ti.func
     def _nearest_contact(self, i, n, q, reach):
-        """The candidate face whose slab (-reach, thickness) holds q with q projecting inside it, deepest
-        first: (triangle or -1, signed distance)."""
+        """Among the n candidates, the closest one within the thickness of q (and at most `reach` inside):
+        (triangle or -1, signed gap [m], push direction)."""
         qf = ti.cast(q, ti.f32)
-        best = -1
-        best_d = ti.cast(self.thickness, ti.f32)
+        best, best_gap, best_dir = -1, ti.cast(1e30, ti.f32), ti.Vector.zero(ti.f32, 3)
         for k in range(n):
-            t = self.cand[i, k]
-            a, b, c = self._corners(t)
-            nrm = self.normals[t]
-            d = (qf - a).dot(nrm)
-            if d < best_d and d > -reach and inside_triangle(qf, a, b, c, nrm):
-                best, best_d = t, d
-        return best, best_d
+            best, best_gap, best_dir = self._proximity(self.cand[i, k], qf, reach, best, best_gap, best_dir)
+        return best, best_gap, best_dir
 
     @ti.kernel
     def _resolve(self, thickness: ti.f64, friction: ti.f64):
@@ -254,32 +275,33 @@ class MeshCollider:
                     if n == 0:
                         break
                     reach = ti.cast(thickness, ti.f32) + ti.cast((q - p).norm(), ti.f32)
-                    hit, tests, near, near_d = -1, 0, -1, ti.cast(0.0, ti.f32)
+                    hit, tests, near, gap, direction = -1, 0, -1, ti.cast(0.0, ti.f32), ti.Vector.zero(ti.f32, 3)
                     if overflow:
                         scanned = 0
-                        hit, near, near_d, tests, scanned = self._scan_all(p, q, reach)
+                        hit, near, gap, direction, tests, scanned = self._scan_all(p, q, reach)
                         ti.atomic_add(self.counters[_CANDIDATES], scanned - n)  # the baseline is every entry
                     else:
                         hit, tests = self._crossing(i, n, p, q)
                         if hit < 0:
-                            near, near_d = self._nearest_contact(i, n, q, reach)
+                            near, gap, direction = self._nearest_contact(i, n, q, reach)
                     ti.atomic_add(self.counters[_TESTS], tests)
-                    contact = hit
-                    d = ti.cast(0.0, ti.f64)
+                    push = ti.Vector.zero(ti.f32, 3)
                     if hit >= 0:
+                        # crossed: the end point goes to the thickness above the crossed face's plane
                         ti.atomic_add(self.counters[_HITS], 1)
                         a, b, c = self._corners(hit)
-                        d = ti.cast((ti.cast(q, ti.f32) - a).dot(self.normals[hit]), ti.f64)
+                        direction = self.normals[hit]
+                        push = (ti.cast(thickness, ti.f32) - (ti.cast(q, ti.f32) - a).dot(direction)) * direction
+                    elif near >= 0:
+                        # too close: away from the closest point of the surface, to the thickness
+                        ti.atomic_add(self.counters[_CONTACTS], 1)
+                        push = (ti.cast(thickness, ti.f32) - gap) * direction
                     else:
-                        contact = near
-                        d = ti.cast(near_d, ti.f64)
-                        if contact >= 0:
-                            ti.atomic_add(self.counters[_CONTACTS], 1)
-                    if contact < 0:
                         break
-                    nrm = ti.cast(self.normals[contact], self.x.dtype)
-                    # end point to the thickness above the contact plane, keeping its tangential position
-                    self.x[i] = q + ti.cast(thickness - d, self.x.dtype) * nrm
+                    nrm = ti.cast(direction, self.x.dtype)
+                    self.x[i] = q + ti.cast(push, self.x.dtype)
+                    if ti.static(self.records_contacts):
+                        self.contact_normal[i] = nrm
                     vel = self.v[i]
                     vn = vel.dot(nrm)
                     if vn < 0:
@@ -320,3 +342,57 @@ class MeshCollider:
     def describe(self) -> dict:
         """What a recorder needs to draw the body."""
         return {"kind": "mesh", "vertices": self.vertices_np, "triangles": self.triangles_np, "name": self.source}
+
+
+@ti.data_oriented
+class Repulsion:
+    """Seed 004 eq. (5), f_r = c_r exp(1/D) N for D <= d, in a form that neither overflows nor jumps
+    (ALGORITHMS.md 3 warns that the published form is unit dependent, overflows float32 below 1.1 cm and is
+    discontinuous at d). Ours, with D the particle's distance to the nearest face of the body:
+
+        f = min(max_force, stiffness (exp(d / max(D, d/10)) - e)) along the outward direction, for D < d
+
+    so it is 0 at D = d (continuous), unit free (d/D is dimensionless) and bounded (exp(10) at D <= d/10, then
+    max_force). A particle found inside the body gets max_force along the face normal. stiffness and max_force
+    are in N per particle, distance in m. It acts as a force source: every integrator sees it explicitly (it
+    is not in the stable-step bound, so keep it soft: it only supplements the position response)."""
+
+    def __init__(self, body: "MeshCollider", stiffness: float = 1e-3, distance: float = 0.01, max_force: float = 0.05):
+        if not (stiffness >= 0 and distance > 0 and max_force > 0):
+            raise ValueError(f"repulsion needs stiffness >= 0, distance > 0, max_force > 0; got {stiffness}, "
+                             f"{distance}, {max_force}")
+        if distance > body.grid.margin:
+            raise ValueError(f"repulsion distance {distance} m exceeds the body grid margin {body.grid.margin} m")
+        self.body = body
+        self.stiffness, self.distance, self.max_force = float(stiffness), float(distance), float(max_force)
+
+    def prepare(self, t: float) -> None:
+        pass
+
+    @ti.func
+    def force(self, i, xi, vi):
+        b = self.body
+        x = ti.cast(xi, ti.f32)
+        d = ti.cast(self.distance, ti.f32)
+        cmin, cmax = b.grid.clamp_range(x - d, x + d)
+        best = d
+        direction = ti.Vector.zero(ti.f32, 3)
+        for a, bb, c in ti.ndrange((cmin[0], cmax[0] + 1), (cmin[1], cmax[1] + 1), (cmin[2], cmax[2] + 1)):
+            cell = b.grid.cell_index(ti.Vector([a, bb, c]))
+            for e in range(b.grid.cell_start[cell], b.grid.cell_start[cell + 1]):
+                t = b.grid.cell_triangles[e]
+                v0, v1, v2 = b._corners(t)
+                near = closest_point_on_triangle(x, v0, v1, v2)
+                gap = (x - near).norm()
+                if gap < best:
+                    best = gap
+                    direction = (x - near) / ti.max(gap, 1e-12)
+                    if (x - near).dot(b.normals[t]) < 0:  # inside the body
+                        best = 0.0
+                        direction = b.normals[t]
+        f = ti.Vector.zero(b.x.dtype, 3)
+        if best < d:
+            e = 2.718281828459045
+            mag = ti.min(self.max_force, self.stiffness * (ti.exp(d / ti.max(best, 0.1 * d)) - e))
+            f = ti.cast(mag * direction, b.x.dtype)
+        return f

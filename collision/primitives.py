@@ -66,8 +66,11 @@ class PrimitiveColliders:
             self.planes_np.append((np.asarray(p, float), n))
             self.plane[k] = [*p, *n]
 
-    def attach(self, x, v, inv_mass, n_particles) -> None:
+    def attach(self, x, v, inv_mass, n_particles, contact_normal=None) -> None:
         self.x, self.v, self.inv_mass, self.n_particles = x, v, inv_mass, n_particles
+        # optional (P,) vec3 field: the unit normal of each contact made, for the implicit integrators
+        self.contact_normal = contact_normal
+        self.records_contacts = contact_normal is not None
         self.x_start = ti.Vector.field(3, x.dtype, x.shape[0])
         self._attached = True
 
@@ -135,6 +138,9 @@ class PrimitiveColliders:
                 if push.norm() > 0 or moved.norm() > 0:
                     self.x[i] = ti.cast(q + push, self.x.dtype)
                     nrm = push.normalized(1e-20)
+                    if ti.static(self.records_contacts):
+                        if push.norm() > 0:
+                            self.contact_normal[i] = ti.cast(nrm, self.x.dtype)
                     vel = self.v[i]
                     vn = vel.dot(ti.cast(nrm, self.x.dtype))
                     if vn < 0:

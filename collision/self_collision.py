@@ -40,7 +40,8 @@ class SelfCollision:
         self.n_tri = len(t)
         self.counters = ti.field(ti.i64, 3)  # candidates, corrections, overflows
 
-    def attach(self, x, v, inv_mass, n_particles) -> None:
+    def attach(self, x, v, inv_mass, n_particles, contact_normal=None) -> None:
+        # (contact_normal is accepted for a uniform interface; cloth-cloth contacts are not handed to the solver)
         self.x, self.v, self.inv_mass, self.n_particles = x, v, inv_mass, n_particles
         P = x.shape[0]
         self.x_start = ti.Vector.field(3, x.dtype, P)

@@ -5,7 +5,8 @@ Spec keys (SI units):
   {"type": "capsule", "a": [x, y, z], "b": [x, y, z], "radius": r}
   {"type": "plane",   "point": [x, y, z], "normal": [nx, ny, nz]}
   {"type": "mesh",    "path": "body.obj" | "mannequin", "scale": 1.0, "translate": [0, 0, 0],
-                      "cell_size": None (1.5 x mean edge), "mode": "fuzzy" | "exact"}
+                      "cell_size": None (1.5 x mean edge), "mode": "fuzzy" | "exact",
+                      "repulsion": None | {"stiffness": N, "distance": m, "max_force": N}}
   every type also takes "thickness" [m] (default 0.003) and "friction" (default 0.3).
 Analytic shapes with the same thickness and friction share one PrimitiveColliders (one kernel).
 """
@@ -47,7 +48,8 @@ def build_colliders(specs, base_dir: Path | None = None) -> list:
         if kind == "mesh":
             v, t = body_mesh(spec["path"], spec.get("scale", 1.0), spec.get("translate", (0.0, 0.0, 0.0)), base_dir)
             out.append(MeshCollider(v, t, thickness=thickness, friction=friction, cell_size=spec.get("cell_size"),
-                                    mode=spec.get("mode", "fuzzy"), source=str(spec["path"])))
+                                    mode=spec.get("mode", "fuzzy"), repulsion=spec.get("repulsion"),
+                                    source=str(spec["path"])))
         elif kind in ("sphere", "capsule", "plane"):
             g = groups.setdefault((thickness, friction), {"sphere": [], "capsule": [], "plane": []})
             if kind == "sphere":

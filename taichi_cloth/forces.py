@@ -1,8 +1,11 @@
-"""Forces on the particles: springs (Hooke with spring damping), gravity, air drag, optional wind.
+"""Forces on the particles: springs (Hooke with spring damping), gravity, air drag, and optional sources
+(wind, body repulsion).
 
 `particle_force(i)` is a @ti.func, so each integrator inlines the same force code into its own
-kernel (one way to compute a force, no per-integrator copies). Parameters live in 0-d fields:
-changing gravity, drag or wind writes a field and never recompiles.
+kernel (one way to compute a force, no per-integrator copies). A source is any object with
+`prepare(t)` and a @ti.func `force(i, x_i, v_i)`; the sources a scene names are unrolled into the
+kernel at compile time, the others cost nothing. Parameters live in 0-d fields: changing gravity,
+drag or wind writes a field and never recompiles.
 """
 
 import numpy as np
@@ -17,12 +20,12 @@ class ForceModel:
     air_damping: 0-d fp [1/s]; drag force -air_damping * m * v (mass-proportional, so the
                  terminal speed m g / (air_damping m) = g / air_damping is resolution-independent)
     f:           (P,) vec3 fp [N] force buffer written by `compute`
-    wind:        a Wind component or None (then no wind code is compiled at all)
+    sources:     extra force sources (Wind, collision.Repulsion, ...)
     """
 
-    def __init__(self, model, state, gravity=(0.0, -9.81, 0.0), air_damping: float = 0.0, wind=None):
-        self.model, self.state, self.wind = model, state, wind
-        self.has_wind = wind is not None  # a compile-time switch: no wind, no wind code
+    def __init__(self, model, state, gravity=(0.0, -9.81, 0.0), air_damping: float = 0.0, sources=()):
+        self.model, self.state = model, state
+        self.sources = tuple(sources)
         fp = model.fp
         self.gravity = ti.Vector.field(3, fp, ())
         self.air_damping = ti.field(fp, ())
@@ -44,8 +47,8 @@ class ForceModel:
 
     def prepare(self, t: float) -> None:
         """Per-step set-up before forces are evaluated at time t [s] (wind gusts and normals)."""
-        if self.wind is not None:
-            self.wind.prepare(t)
+        for src in self.sources:
+            src.prepare(t)
 
     @ti.func
     def spring_force(self, e, xi, vi):
@@ -60,7 +63,7 @@ class ForceModel:
 
     @ti.func
     def particle_force(self, i, with_drag: ti.template()):
-        """Total force [N] on particle i: gravity, springs, drag (if with_drag), wind (if the scene has it)."""
+        """Total force [N] on particle i: gravity, springs, drag (if with_drag), and the scene's sources."""
         m = self.model
         xi = self.state.x[i]
         vi = self.state.v[i]
@@ -69,8 +72,8 @@ class ForceModel:
             f -= self.air_damping[None] * m.mass[i] * vi
         for e in range(m.adj_offset[i], m.adj_offset[i + 1]):
             f += self.spring_force(e, xi, vi)
-        if ti.static(self.has_wind):
-            f += self.wind.force(i, vi)
+        for k in ti.static(range(len(self.sources))):
+            f += self.sources[k].force(i, xi, vi)
         return f
 
     @ti.kernel

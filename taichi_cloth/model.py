@@ -195,6 +195,7 @@ class State:
     x: (P,) vec3 fp [m]    positions
     v: (P,) vec3 fp [m/s]  velocities
     t: float [s]           simulated time (host side)
+    contacts: None, or the Contacts (normals of the last step's contacts) the scene's colliders fill
     """
 
     def __init__(self, model: Model):
@@ -202,6 +203,7 @@ class State:
         self.x = ti.Vector.field(3, model.fp, model.capacity[0])
         self.v = ti.Vector.field(3, model.fp, model.capacity[0])
         self.t = 0.0
+        self.contacts = None  # a Contacts object when the scene has colliders
         self.reset()
 
     def reset(self) -> None:

@@ -17,6 +17,7 @@ import taichi as ti
 
 from .builder import ClothData
 from .colliders import build_colliders
+from .contacts import Contacts
 from .diagnostics import Diagnostics, Measurement
 from .errors import BlowUpError, SceneError
 from .forces import ForceModel
@@ -139,18 +140,22 @@ class Scene:
         self.pinned_indices = np.nonzero(self.model.pinned)[0]
 
         self.wind = Wind(self.model, self.state, **wind) if wind is not None else None
-        self.forces = ForceModel(self.model, self.state, gravity, air_damping, self.wind)
-        self.integrator = integrator_class(integrator)(self.model, self.state, self.forces,
-                                                       **(integrator_options or {}))
-        self.stretch_limit = StretchLimit(self.model, self.state, **stretch_limit) if stretch_limit else None
         self.colliders = build_colliders(colliders, base_dir) if colliders else []
         if self_collision:  # first, so that the body colliders have the last word on every position
             from collision.self_collision import SelfCollision
 
             options = self_collision if isinstance(self_collision, dict) else {}
             self.colliders.insert(0, SelfCollision(self.model.data.triangles, self.model.data.positions, **options))
+        self.contacts = Contacts(self.model) if self.colliders else None
+        self.state.contacts = self.contacts
         for c in self.colliders:
-            c.attach(self.state.x, self.state.v, self.model.inv_mass, self.model.n_particles)
+            c.attach(self.state.x, self.state.v, self.model.inv_mass, self.model.n_particles, self.contacts.normal)
+        # force sources: the wind and the repulsion of mesh colliders that ask for it
+        sources = [s for s in [self.wind] + [getattr(c, "repulsion", None) for c in self.colliders] if s is not None]
+        self.forces = ForceModel(self.model, self.state, gravity, air_damping, sources)
+        self.integrator = integrator_class(integrator)(self.model, self.state, self.forces,
+                                                       **(integrator_options or {}))
+        self.stretch_limit = StretchLimit(self.model, self.state, **stretch_limit) if stretch_limit else None
         self.diagnostics = Diagnostics(self.model, self.state, self.forces)
         self._normals: VertexNormals | None = None
         self.steps_taken = 0
@@ -205,8 +210,10 @@ class Scene:
                 self.pins.apply(self.state.t, dt)
             if self.stretch_limit is not None:
                 self.stretch_limit.apply(dt)
-            for c in colliders:
-                c.resolve(dt)
+            if colliders:
+                self.contacts.clear()
+                for c in colliders:
+                    c.resolve(dt)
             self.steps_taken += 1
 
     def measure(self) -> Measurement:

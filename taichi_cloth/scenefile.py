@@ -36,7 +36,8 @@ and a component whose table is absent is never built. The schema (units in brack
     [stretch_limit]               # max_strain (0.1 = 10 %), iterations (max passes), tolerance, omega
     [[colliders]]                 # type = "sphere" (center, radius) | "capsule" (a, b, radius) | "plane" (point,
                                   # normal) | "mesh" (path: a file or "mannequin", scale, translate, cell_size,
-                                  # mode = "fuzzy" | "exact"); all: thickness [m] = 0.003, friction = 0.3
+                                  # mode = "fuzzy" | "exact", repulsion = {stiffness [N], distance [m],
+                                  # max_force [N]}); all: thickness [m] = 0.003, friction = 0.3
     [output]                      # dir = "out", record = true, mesh = true, record_every = 1
 """
 from __future__ import annotations
@@ -161,6 +162,8 @@ SCHEMA = Table({
         "point": Field("vec3", None), "normal": Field("vec3", None),
         "path": Field("str", None), "scale": Field("number", None, _positive), "translate": Field("vec3", None),
         "cell_size": Field("number", None, _positive), "mode": Field("str", None, choices=("fuzzy", "exact")),
+        "repulsion": Table({"stiffness": Field("number", 1e-3, _nonneg), "distance": Field("number", 0.01, _positive),
+                            "max_force": Field("number", 0.05, _positive)}),
         "thickness": Field("number", 0.003, _positive), "friction": Field("number", 0.3, _nonneg)})),
     "output": Table({"dir": Field("str", "out"), "record": Field("bool", True), "mesh": Field("bool", True),
                      "record_every": Field("int", 1, _at_least(1))}, always=True),
@@ -298,7 +301,7 @@ def parse_scene(source: str | Path | dict, base_dir: Path | None = None, label: 
 #: keys each collider type needs, and the optional ones it accepts (thickness and friction: every type)
 COLLIDER_KEYS = {"sphere": ({"center", "radius"}, set()), "capsule": ({"a", "b", "radius"}, set()),
                  "plane": ({"point", "normal"}, set()),
-                 "mesh": ({"path"}, {"scale", "translate", "cell_size", "mode"})}
+                 "mesh": ({"path"}, {"scale", "translate", "cell_size", "mode", "repulsion"})}
 
 
 def _check_collider(v: "_Validator", col: dict, where: str) -> None:

@@ -49,7 +49,7 @@ class Wind:
         self.normals.compute(False)
 
     @ti.func
-    def force(self, i, vi):
+    def force(self, i, xi, vi):
         n = self.normals.normal[i]
         area = n.norm()
         f = ti.Vector.zero(self.model.fp, 3)

@@ -19,7 +19,8 @@ r = h^2 K / (m + h^2 K), so a stiff free-falling sheet falls at a fraction of g;
   jv_term:    add h^2 sum_j k_ij (v_j - v_i) (the h J~ v term) to the right-hand side, which is what
               makes more than two sweeps safe (without it, more sweeps blew up in our tests);
   sweeps:     the number of Jacobi sweeps (the seed uses 2).
-Pinned particles have dv = 0 in the solve.
+Pinned particles have dv = 0 in the solve; a particle in contact with a collider in the last step has the
+normal component of its dv removed after every sweep (the BW98 constraint filter, see taichi_cloth.contacts).
 """
 
 import warnings
@@ -52,12 +53,21 @@ class ApproxImplicit(Integrator):
         self.inv_diag = ti.field(model.fp, P)           # 1 / (m + h^2 sum k) [1/kg]
         self.dv = ti.Vector.field(3, model.fp, (2, P))  # ping-pong Jacobi iterates [m/s]; row 0 keeps the last dv
         # sweeps and warm start are fixed per integrator: the sweeps unroll into one kernel (one launch per step)
+        self.contacts = state.contacts
+        self.has_contacts = state.contacts is not None
         self.warm = bool(self.options["warm_start"])
         self.extra_sweeps = self.options["sweeps"] - (0 if self.warm else 1)
         self.reset()
 
     def reset(self) -> None:
         self.dv.fill(0)
+
+    @ti.func
+    def _filter(self, i, vec):
+        out = vec
+        if ti.static(self.has_contacts):
+            out = self.contacts.filter(i, vec)
+        return out
 
     @ti.kernel
     def _advance(self, dt: ti.f64):
@@ -79,14 +89,14 @@ class ApproxImplicit(Integrator):
                 self.rhs[i] = rhs
                 self.inv_diag[i] = inv_diag
                 if ti.static(not self.warm):
-                    self.dv[0, i] = rhs * inv_diag  # sweep 1 from dv = 0
+                    self.dv[0, i] = self._filter(i, rhs * inv_diag)  # sweep 1 from dv = 0
         for k in ti.static(range(self.extra_sweeps)):
             for i in range(m.n_particles[None]):
                 if m.inv_mass[i] != 0:
                     acc = ti.Vector.zero(m.fp, 3)
                     for e in range(m.adj_offset[i], m.adj_offset[i + 1]):
                         acc += m.stiffness[m.adj_spring[e]] * self.dv[k % 2, m.adj_other[e]]
-                    self.dv[(k + 1) % 2, i] = (self.rhs[i] + h * h * acc) * self.inv_diag[i]
+                    self.dv[(k + 1) % 2, i] = self._filter(i, (self.rhs[i] + h * h * acc) * self.inv_diag[i])
         last = ti.static(self.extra_sweeps % 2)
         for i in range(m.n_particles[None]):
             if m.inv_mass[i] != 0:

@@ -7,7 +7,9 @@ then v += dv, x += h v. Per spring (u = unit direction, l = length, L0 = rest le
     D_s = kd u u^T                                     (spring damping)
 so the product is (A q)_i = m_i (1 + h gamma) q_i + sum_s [ (h kd + h^2 k (1-g)) u (u.dq) + h^2 k g dq ],
 dq = q_i - q_j, g = max(0, 1 - L0/l). It is evaluated matrix-free with a per-particle gather.
-Pinned particles are filtered out of the solve (BW98 section 5.3, S_i = 0). Jacobi preconditioner.
+Pinned particles are filtered out of the solve (BW98 section 5.3, S_i = 0), and a particle in contact with a
+collider in the last step has its normal component filtered (S_i = I - n n^T: its normal velocity does not
+change in the solve, the collider handles it). Jacobi preconditioner.
 CG stops when sqrt(r.Pr / b.Pb) <= cg_tolerance or after cg_max_iterations.
 """
 
@@ -43,6 +45,8 @@ class Implicit(Integrator):
         self.dv, self.r, self.z, self.p, self.q = (ti.Vector.field(3, fp, P) for _ in range(5))
         self.cg = ti.field(ti.f64, 7)               # CG scalars (see the indices above), kept on the device
         self.stats = {"cg_iterations": 0, "cg_unconverged_steps": 0}
+        self.contacts = state.contacts
+        self.has_contacts = state.contacts is not None  # compile-time: no colliders, no filter code
         self.last_residual = 0.0  # sqrt(r.Pr / b.Pb) at the end of the last step
 
     def _advance(self, dt: float) -> None:
@@ -58,6 +62,13 @@ class Implicit(Integrator):
         self.last_residual = math.sqrt(max(delta, 0.0) / delta0) if delta0 > 0 else 0.0
         self.stats["cg_iterations"] += int(it)
         self.stats["cg_unconverged_steps"] += int(self.last_residual > self.options["cg_tolerance"])
+
+    @ti.func
+    def _filter(self, i, vec):
+        out = vec
+        if ti.static(self.has_contacts):
+            out = self.contacts.filter(i, vec)
+        return out
 
     @ti.func
     def _product(self, i, vec: ti.template()):
@@ -105,11 +116,11 @@ class Implicit(Integrator):
                     axial_k = self.spring_axial[sp] - h * m.damping[sp]
                     kv += axial_k * u.dot(dvel) * u + self.spring_iso[sp] * dvel
                     diag += self.spring_axial[sp] * u * u + self.spring_iso[sp]
-                b = h * f - kv
+                b = self._filter(i, h * f - kv)
                 self.b[i] = b
                 self.inv_diag[i] = 1.0 / diag
                 self.r[i] = b
-                z = b * self.inv_diag[i]
+                z = self._filter(i, b * self.inv_diag[i])
                 self.z[i] = z
                 self.p[i] = zero
                 delta += ti.cast(b.dot(z), ti.f64)
@@ -137,7 +148,7 @@ class Implicit(Integrator):
             for i in range(m.n_particles[None]):
                 q = ti.Vector.zero(m.fp, 3)
                 if m.inv_mass[i] != 0 and cg[self._ACTIVE] != 0:
-                    q = m.mass[i] * mass_scale * self.p[i] + self._product(i, self.p)
+                    q = self._filter(i, m.mass[i] * mass_scale * self.p[i] + self._product(i, self.p))
                 self.q[i] = q
                 pq += ti.cast(self.p[i].dot(q), ti.f64)
             alpha = ti.cast(0.0, ti.f64)
@@ -150,7 +161,7 @@ class Implicit(Integrator):
                     self.dv[i] += a * self.p[i]
                     r = self.r[i] - a * self.q[i]
                     self.r[i] = r
-                    z = r * self.inv_diag[i]
+                    z = self._filter(i, r * self.inv_diag[i])
                     self.z[i] = z
                     delta_new += ti.cast(r.dot(z), ti.f64)
             if cg[self._ACTIVE] != 0:

@@ -1,0 +1,11 @@
+"""A silk sheet dropped over the shipped CC0 mannequin (demos/scenes/drape_on_mannequin.toml).
+
+    python demos/drape_on_mannequin.py [--out DIR] [--frames N] [--integrator NAME] [--dt H] [--arch cpu|gpu]
+
+Writes DIR/drape_on_mannequin.rrd (the body logged once) and the final mesh, and prints the collision
+counters: triangle tests done by the fuzzy ranking against the candidates in the touched voxels.
+"""
+from _common import run_demo
+
+if __name__ == "__main__":
+    raise SystemExit(run_demo("drape_on_mannequin.toml", __doc__))
