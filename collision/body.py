@@ -34,8 +34,8 @@ class MeshCollider:
     distance from the surface; friction: Coulomb coefficient; cell_size [m]: voxel edge (default 1.5 x the
     mean edge length); max_step [m]: the largest particle motion per step the grid margin allows for; mode:
     "fuzzy" or "exact"; max_candidates: per-particle candidate list length (a particle with more has its cells
-    scanned unranked instead, and counted as overflows); passes: detection passes per step (a corrected particle
-    is checked again); reach_gate: also give mu = 0 to faces whose plane the motion cannot reach this step (off:
+    scanned unranked instead, and counted as overflows); passes: detection passes per step (a particle moved
+    out of a crossing is checked again); reach_gate: also give mu = 0 to faces whose plane the motion cannot reach this step (off:
     the direction alone decides, for measuring what the gate saves); repulsion: None, or Repulsion keyword
     arguments (stiffness, distance, max_force) to add seed 004's repulsion force.
 
@@ -238,17 +238,19 @@ class MeshCollider:
         usually in front of the neighbouring face)."""
         v0, v1, v2 = self._corners(t)
         nrm = self.normals[t]
-        gap = ti.cast(0.0, ti.f32)
-        direction = nrm
-        if inside_triangle(qf, v0, v1, v2, nrm):
-            gap = (qf - v0).dot(nrm)
-        else:
-            offset = qf - closest_point_on_triangle(qf, v0, v1, v2)
-            gap = offset.norm()
-            if gap > 1e-9:
-                direction = offset / gap
-        if gap < ti.cast(self.thickness, ti.f32) and gap > -reach and ti.abs(gap) < ti.abs(best_gap):
-            best, best_gap, best_dir = t, gap, direction
+        plane = (qf - v0).dot(nrm)
+        tau = ti.cast(self.thickness, ti.f32)
+        # the gap is at least the plane distance: far planes are culled before the closest-point computation
+        if plane < tau and plane > -reach:
+            gap = plane
+            direction = nrm
+            if not inside_triangle(qf, v0, v1, v2, nrm):
+                offset = qf - closest_point_on_triangle(qf, v0, v1, v2)
+                gap = offset.norm()
+                if gap > 1e-9:
+                    direction = offset / gap
+            if gap < tau and ti.abs(gap) < ti.abs(best_gap):
+                best, best_gap, best_dir = t, gap, direction
         return best, best_gap, best_dir
 
     @ti.func
@@ -263,15 +265,17 @@ class MeshCollider:
 
     @ti.kernel
     def _resolve(self, thickness: ti.f64, friction: ti.f64):
+        # counters accumulate in kernel locals (reduced per thread), not in contended global atomics
+        queries, candidates, overflows, tests_done, crossings, contacts = 0, 0, 0, 0, 0, 0
         for i in range(self.n_particles[None]):
             if self.inv_mass[i] != 0:
                 p = self.x_start[i]
                 for _ in range(self.passes):
                     q = self.x[i]
                     n, overflow = self._collect(i, p, q)
-                    ti.atomic_add(self.counters[_QUERIES], 1)
-                    ti.atomic_add(self.counters[_CANDIDATES], n)
-                    ti.atomic_add(self.counters[_OVERFLOW], overflow)
+                    queries += 1
+                    candidates += n
+                    overflows += overflow
                     if n == 0:
                         break
                     reach = ti.cast(thickness, ti.f32) + ti.cast((q - p).norm(), ti.f32)
@@ -279,27 +283,28 @@ class MeshCollider:
                     if overflow:
                         scanned = 0
                         hit, near, gap, direction, tests, scanned = self._scan_all(p, q, reach)
-                        ti.atomic_add(self.counters[_CANDIDATES], scanned - n)  # the baseline is every entry
+                        candidates += scanned - n  # the baseline is every entry
                     else:
                         hit, tests = self._crossing(i, n, p, q)
                         if hit < 0:
                             near, gap, direction = self._nearest_contact(i, n, q, reach)
-                    ti.atomic_add(self.counters[_TESTS], tests)
+                    tests_done += tests
                     push = ti.Vector.zero(ti.f32, 3)
                     if hit >= 0:
                         # crossed: the end point goes to the thickness above the crossed face's plane
-                        ti.atomic_add(self.counters[_HITS], 1)
+                        crossings += 1
                         a, b, c = self._corners(hit)
                         direction = self.normals[hit]
                         push = (ti.cast(thickness, ti.f32) - (ti.cast(q, ti.f32) - a).dot(direction)) * direction
                     elif near >= 0:
                         # too close: away from the closest point of the surface, to the thickness
-                        ti.atomic_add(self.counters[_CONTACTS], 1)
+                        contacts += 1
                         push = (ti.cast(thickness, ti.f32) - gap) * direction
                     else:
                         break
                     nrm = ti.cast(direction, self.x.dtype)
                     self.x[i] = q + ti.cast(push, self.x.dtype)
+                    crossed = hit >= 0
                     if ti.static(self.records_contacts):
                         self.contact_normal[i] = nrm
                     vel = self.v[i]
@@ -311,6 +316,14 @@ class MeshCollider:
                         if vt_len > 0:
                             scale = ti.max(0.0, 1.0 - ti.cast(friction, self.x.dtype) * (-vn) / vt_len)
                         self.v[i] = scale * vt
+                    if not crossed:
+                        break  # a proximity push is local: only a crossing response needs checking again
+        self.counters[_QUERIES] += queries
+        self.counters[_CANDIDATES] += candidates
+        self.counters[_OVERFLOW] += overflows
+        self.counters[_TESTS] += tests_done
+        self.counters[_HITS] += crossings
+        self.counters[_CONTACTS] += contacts
 
     # ------------------------------------------------------------------ exact queries (tests, metrics)
     def signed_distance(self, points) -> np.ndarray:

@@ -116,10 +116,7 @@ def _cmd_info(args) -> int:
     return 0
 
 
-def _cmd_bench(args) -> int:
-    from .bench import run_bench
-
-    return run_bench(args)
+BENCH_SUITES = ("integrators", "collision")
 
 
 def main(argv=None) -> int:
@@ -131,10 +128,22 @@ def main(argv=None) -> int:
     p_run.set_defaults(func=_cmd_run)
     p_info = sub.add_parser("info", help="versions, integrators and their options, materials")
     p_info.set_defaults(func=_cmd_info)
-    p_bench = sub.add_parser("bench", help="ms per step and real-time factor of every integrator")
-    from .bench import add_bench_arguments
+    p_bench = sub.add_parser("bench", help="benchmarks: `bench [integrators]` or `bench collision`")
+    suites = p_bench.add_subparsers(dest="suite", required=True)
+    from . import bench, bench_collision
 
-    add_bench_arguments(p_bench)
-    p_bench.set_defaults(func=_cmd_bench)
+    for name, module, run, doc in (("integrators", bench, bench.run_bench, "ms per step and real-time factor"),
+                                   ("collision", bench_collision, bench_collision.run, "collision cost on the mannequin")):
+        p_suite = suites.add_parser(name, help=doc)
+        if module is bench:
+            bench.add_bench_arguments(p_suite)
+        else:
+            bench_collision.add_arguments(p_suite)
+            p_suite.add_argument("--arch", default="cpu", choices=("cpu", "gpu"))
+            p_suite.add_argument("--out", default="out/bench")
+        p_suite.set_defaults(func=run)
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv and argv[0] == "bench" and (len(argv) == 1 or argv[1] not in BENCH_SUITES + ("-h", "--help")):
+        argv.insert(1, "integrators")  # `bench` alone is the integrator benchmark
     args = parser.parse_args(argv)
     return args.func(args)

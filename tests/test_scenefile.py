@@ -37,7 +37,35 @@ def test_good_file_builds_what_it_names(tmp_path):
     assert sc.integrator.name == "approx-implicit" and sc.dt == 0.005
     assert sc.model.data.n_particles == 36 and sc.model.pinned.sum() == 2
     assert sc.model.data.mass.sum() == pytest.approx(tc.MATERIALS["silk"].density * 0.25)
-    assert sc.wind is None and sc.stretch_limit is None and sc.pins is None
+    assert sc.wind is None and sc.stretch_limit is None and sc.pins is None and sc.colliders == []
+    assert sc.contacts is None
+
+
+def test_colliders_from_a_file(tmp_path):
+    text = GOOD + """
+self_collision = true
+[[colliders]]
+type = "mesh"
+path = "mannequin"
+mode = "exact"
+repulsion = { stiffness = 1e-4, distance = 0.005 }
+[[colliders]]
+type = "sphere"
+center = [0.0, 0.5, 0.0]
+radius = 0.2
+[[colliders]]
+type = "plane"
+point = [0.0, 0.0, 0.0]
+normal = [0.0, 1.0, 0.0]
+friction = 0.8
+"""
+    sc = tc.load_scene(write(tmp_path, text.replace('name = "t"\n', 'name = "t"\nself_collision = true\n', 1)
+                             .replace("\nself_collision = true\n[[colliders]]", "\n[[colliders]]", 1))).scene
+    kinds = [type(c).__name__ for c in sc.colliders]
+    assert kinds == ["SelfCollision", "MeshCollider", "PrimitiveColliders", "PrimitiveColliders"]
+    assert sc.colliders[1].mode == "exact" and sc.colliders[1].repulsion.distance == 0.005
+    assert sc.colliders[3].friction == 0.8 and sc.colliders[2].n_spheres == 1
+    assert sc.forces.sources == (sc.colliders[1].repulsion,)
 
 
 def test_overrides_replace_integrator_and_step(tmp_path):
@@ -65,6 +93,12 @@ def test_overrides_replace_integrator_and_step(tmp_path):
     (('frames = 3', 'frames = 3\n[wind]\ncoefficient = 1.0'), "[wind]: missing required key 'velocity'"),
     (('[integrator]\nname = "approx-implicit"\ndt = 0.005', ''), "missing required table [integrator]"),
     (('frames = 3', 'frames = 3\n[stretch_limit]\nomega = 2.5'), "[stretch_limit] omega: must lie in (0, 2)"),
+    (('frames = 3', 'frames = 3\n[[colliders]]\ntype = "sphere"\ncenter = [0, 0, 0]'),
+     "[[colliders]] #1: a sphere collider needs 'radius'"),
+    (('frames = 3', 'frames = 3\n[[colliders]]\ntype = "plane"\npoint = [0, 0, 0]\nnormal = [0, 1, 0]\nradius = 1'),
+     "[[colliders]] #1: 'radius' is not a plane collider key"),
+    (('frames = 3', 'frames = 3\n[[colliders]]\ntype = "cube"'), "[[colliders]] #1 type: 'cube' is not one of: sphere"),
+    (('frames = 3', 'frames = 3\nself_collision = "yes"'), "self_collision: must be true or false"),
 ])
 def test_each_mistake_names_its_key(tmp_path, edit, expected):
     old, new = edit
