@@ -168,3 +168,28 @@ class PrimitiveColliders:
     def describe(self) -> dict:
         return {"kind": "primitives", "spheres": self.spheres_np, "capsules": self.capsules_np,
                 "planes": self.planes_np}
+
+
+#: Seed 002's idea of a body made of sphere colliders, as spheres and capsules sized from cross-sections of
+#: the shipped mannequin (A-pose, Y up, feet on y = 0, front +z): (center, radius) and (a, b, radius), metres.
+STANDIN_SPHERES = [((0.0, 1.55, 0.06), 0.085)]  # head
+STANDIN_CAPSULES = [
+    ((0.0, 1.40, 0.03), (0.0, 1.47, 0.04), 0.05),          # neck
+    ((-0.17, 1.33, 0.02), (0.17, 1.33, 0.02), 0.06),       # shoulders
+    ((-0.06, 0.95, 0.03), (-0.06, 1.28, 0.03), 0.105),     # torso, left and right halves
+    ((0.06, 0.95, 0.03), (0.06, 1.28, 0.03), 0.105),
+    ((-0.09, 0.85, 0.0), (0.09, 0.85, 0.0), 0.10),         # hips
+    ((-0.20, 1.305, 0.01), (-0.32, 1.16, 0.04), 0.045),   # upper arms
+    ((0.20, 1.305, 0.01), (0.32, 1.16, 0.04), 0.045),
+    ((-0.32, 1.16, 0.04), (-0.45, 1.01, 0.21), 0.033),     # forearms (the hands are in front)
+    ((0.32, 1.16, 0.04), (0.45, 1.01, 0.21), 0.033),
+    ((-0.09, 0.80, 0.02), (-0.145, 0.50, 0.028), 0.065),   # thighs (the legs stand apart)
+    ((0.09, 0.80, 0.02), (0.145, 0.50, 0.028), 0.065),
+    ((-0.145, 0.50, 0.028), (-0.215, 0.10, 0.0), 0.042),   # shins
+    ((0.145, 0.50, 0.028), (0.215, 0.10, 0.0), 0.042),
+]
+
+
+def mannequin_standin(thickness: float = 0.003, friction: float = 0.3) -> PrimitiveColliders:
+    """A cheap analytic stand-in for the mannequin (1 sphere, 13 capsules) for fast tests and previews."""
+    return PrimitiveColliders(STANDIN_SPHERES, STANDIN_CAPSULES, thickness=thickness, friction=friction)

@@ -7,6 +7,7 @@ Spec keys (SI units):
   {"type": "mesh",    "path": "body.obj" | "mannequin", "scale": 1.0, "translate": [0, 0, 0],
                       "cell_size": None (1.5 x mean edge), "mode": "fuzzy" | "exact",
                       "repulsion": None | {"stiffness": N, "distance": m, "max_force": N}}
+  {"type": "standin"}: seed 002's sphere-collider body, a sphere-and-capsule stand-in for the mannequin
   every type also takes "thickness" [m] (default 0.003) and "friction" (default 0.3).
 Analytic shapes with the same thickness and friction share one PrimitiveColliders (one kernel).
 """
@@ -50,16 +51,21 @@ def build_colliders(specs, base_dir: Path | None = None) -> list:
             out.append(MeshCollider(v, t, thickness=thickness, friction=friction, cell_size=spec.get("cell_size"),
                                     mode=spec.get("mode", "fuzzy"), repulsion=spec.get("repulsion"),
                                     source=str(spec["path"])))
-        elif kind in ("sphere", "capsule", "plane"):
+        elif kind in ("sphere", "capsule", "plane", "standin"):
             g = groups.setdefault((thickness, friction), {"sphere": [], "capsule": [], "plane": []})
-            if kind == "sphere":
+            if kind == "standin":
+                from collision.primitives import STANDIN_CAPSULES, STANDIN_SPHERES
+
+                g["sphere"] += STANDIN_SPHERES
+                g["capsule"] += STANDIN_CAPSULES
+            elif kind == "sphere":
                 g["sphere"].append((spec["center"], spec["radius"]))
             elif kind == "capsule":
                 g["capsule"].append((spec["a"], spec["b"], spec["radius"]))
             else:
                 g["plane"].append((spec["point"], spec["normal"]))
         else:
-            raise ValueError(f"unknown collider type {kind!r} (sphere, capsule, plane, mesh)")
+            raise ValueError(f"unknown collider type {kind!r} (sphere, capsule, plane, mesh, standin)")
     for (thickness, friction), g in groups.items():
         out.append(PrimitiveColliders(g["sphere"], g["capsule"], g["plane"], thickness=thickness, friction=friction))
     return out

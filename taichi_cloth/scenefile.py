@@ -37,7 +37,8 @@ and a component whose table is absent is never built. The schema (units in brack
     [[colliders]]                 # type = "sphere" (center, radius) | "capsule" (a, b, radius) | "plane" (point,
                                   # normal) | "mesh" (path: a file or "mannequin", scale, translate, cell_size,
                                   # mode = "fuzzy" | "exact", repulsion = {stiffness [N], distance [m],
-                                  # max_force [N]}); all: thickness [m] = 0.003, friction = 0.3
+                                  # max_force [N]}) | "standin" (spheres and capsules for the mannequin);
+                                  # all: thickness [m] = 0.003, friction = 0.3
     [output]                      # dir = "out", record = true, mesh = true, record_every = 1
 """
 from __future__ import annotations
@@ -156,7 +157,7 @@ SCHEMA = Table({
                             "tolerance": Field("number", 1e-3, _nonneg),
                             "omega": Field("number", 1.5, lambda v: None if 0 < v < 2 else "must lie in (0, 2)")}),
     "colliders": Array(Table({
-        "type": Field("str", choices=("sphere", "capsule", "plane", "mesh")),
+        "type": Field("str", choices=("sphere", "capsule", "plane", "mesh", "standin")),
         "center": Field("vec3", None), "radius": Field("number", None, _positive),
         "a": Field("vec3", None), "b": Field("vec3", None),
         "point": Field("vec3", None), "normal": Field("vec3", None),
@@ -300,7 +301,7 @@ def parse_scene(source: str | Path | dict, base_dir: Path | None = None, label: 
 
 #: keys each collider type needs, and the optional ones it accepts (thickness and friction: every type)
 COLLIDER_KEYS = {"sphere": ({"center", "radius"}, set()), "capsule": ({"a", "b", "radius"}, set()),
-                 "plane": ({"point", "normal"}, set()),
+                 "plane": ({"point", "normal"}, set()), "standin": (set(), set()),
                  "mesh": ({"path"}, {"scale", "translate", "cell_size", "mode", "repulsion"})}
 
 

@@ -273,3 +273,24 @@ def test_self_collision_keeps_a_folded_towel_in_two_layers():
     assert sunk_without > 0.6
     assert sunk_with < 0.3
     assert sc.colliders[0].counter_values()["corrections"] > 0
+
+
+def test_standin_approximates_the_mannequin():
+    """The sphere-and-capsule stand-in lies mostly inside the mannequin and fills most of it."""
+    from collision import mannequin_standin
+    from collision.mannequin import load_mannequin
+
+    m = load_mannequin()
+    body = MeshCollider(m.vertices, m.triangles, source="mannequin")
+    standin = mannequin_standin()
+    rng = np.random.default_rng(0)
+    pts = rng.uniform([-0.5, 0.0, -0.15], [0.5, 1.7, 0.3], (60000, 3))
+    in_standin = pts[standin.signed_distance(pts) < 0][:1500]
+    assert np.mean(body.signed_distance(in_standin) < 0) > 0.75
+    sample = pts[:6000]
+    in_body = sample[body.signed_distance(sample) < 0]
+    assert len(in_body) > 100 and np.mean(standin.signed_distance(in_body) < 0) > 0.75
+    sc = tc.Scene(tc.ClothBuilder.grid((0.6, 0.6), (10, 10), "cotton", center=(0.0, 1.72, 0.05), plane="xz"),
+                  integrator="implicit", dt=1 / 120, colliders=[{"type": "standin"}])
+    sc.step(60)
+    assert sc.colliders[0].signed_distance(sc.positions()).min() > -5e-4
