@@ -17,8 +17,10 @@ import numpy as np
 import taichi as ti
 
 from .geometry import closest_point_on_triangle, collision_possibility, inside_triangle, segment_triangle, solid_angle
+from .base import ParticleCollider
 from .grid import VoxelGrid
 from .meshes import validate_triangle_mesh
+from .fields import FieldBlock
 
 MODES = ("fuzzy", "exact")
 _CANDIDATES, _TESTS, _HITS, _CONTACTS, _OVERFLOW, _QUERIES = range(6)
@@ -27,7 +29,7 @@ COUNTER_NAMES = ("candidates", "crossing_tests", "crossings", "proximity_contact
 
 
 @ti.data_oriented
-class MeshCollider:
+class MeshCollider(ParticleCollider):
     """A triangle body (e.g. the mannequin) that cloth particles cannot pass.
 
     vertices (V,3) [m] and triangles (T,3) with outward-facing winding; thickness [m]: the cloth keeps this
@@ -64,11 +66,13 @@ class MeshCollider:
         edges = np.linalg.norm(v[t] - v[t[:, [1, 2, 0]]], axis=2)
         self.mean_edge = float(edges.mean())
         self.cell_size = float(cell_size) if cell_size else 1.5 * self.mean_edge
-        self.vertices = ti.Vector.field(3, ti.f32, len(v))
-        self.triangles = ti.Vector.field(3, ti.i32, len(t))
-        self.normals = ti.Vector.field(3, ti.f32, len(t))
-        self.n_triangles = ti.field(ti.i32, ())
-        self.counters = ti.field(ti.i64, 6)
+        blk = FieldBlock()
+        self.vertices = blk.vector(3, ti.f32, len(v))
+        self.triangles = blk.vector(3, ti.i32, len(t))
+        self.normals = blk.vector(3, ti.f32, len(t))
+        self.n_triangles = blk.scalar(ti.i32, ())
+        self.counters = blk.scalar(ti.i64, 6)
+        blk.finalize(self)
         self.vertices.from_numpy(v.astype(np.float32))
         self.triangles.from_numpy(t.astype(np.int32))
         self.n_triangles[None] = len(t)
@@ -99,27 +103,12 @@ class MeshCollider:
             self.normals[t] = (self.vertices[c[1]] - a).cross(self.vertices[c[2]] - a).normalized(1e-20)
 
     # ------------------------------------------------------------------ the cloth side
-    def attach(self, x, v, inv_mass, n_particles, contact_normal=None) -> None:
-        """Bind the cloth: x, v (P,) vec3 fields [m, m/s], inv_mass (P,) [1/kg] (0 = pinned: never moved),
-        n_particles a 0-d i32 field. Allocates the per-particle scratch (start positions, candidates)."""
-        self.x, self.v, self.inv_mass, self.n_particles = x, v, inv_mass, n_particles
-        # optional (P,) vec3 field: the unit normal of each contact made, for the implicit integrators
-        self.contact_normal = contact_normal
-        self.records_contacts = contact_normal is not None
-        P = x.shape[0]
-        self.x_start = ti.Vector.field(3, x.dtype, P)
-        self.cand = ti.field(ti.i32, (P, self.max_candidates))
-        self.cand_mu = ti.field(ti.f32, (P, self.max_candidates))
-        self._attached = True
-
-    def begin_step(self) -> None:
-        """Remember where every particle starts the step."""
-        self._copy_start()
-
-    @ti.kernel
-    def _copy_start(self):
-        for i in range(self.n_particles[None]):
-            self.x_start[i] = self.x[i]
+    def _on_attach(self) -> None:
+        P = self.x.shape[0]
+        blk = FieldBlock()
+        self.cand = blk.scalar(ti.i32, (P, self.max_candidates))
+        self.cand_mu = blk.scalar(ti.f32, (P, self.max_candidates))
+        blk.finalize(self)
 
     def resolve(self, dt: float) -> None:
         """After the step: find crossings and contacts of every particle and respond (positions, velocities)."""
@@ -307,15 +296,7 @@ class MeshCollider:
                     crossed = hit >= 0
                     if ti.static(self.records_contacts):
                         self.contact_normal[i] = nrm
-                    vel = self.v[i]
-                    vn = vel.dot(nrm)
-                    if vn < 0:
-                        vt = vel - vn * nrm
-                        vt_len = vt.norm()
-                        scale = 0.0
-                        if vt_len > 0:
-                            scale = ti.max(0.0, 1.0 - ti.cast(friction, self.x.dtype) * (-vn) / vt_len)
-                        self.v[i] = scale * vt
+                    self.respond(i, nrm, ti.Vector.zero(self.x.dtype, 3), ti.cast(friction, self.x.dtype))
                     if not crossed:
                         break  # a proximity push is local: only a crossing response needs checking again
         self.counters[_QUERIES] += queries

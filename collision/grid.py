@@ -12,6 +12,7 @@ import math
 
 import numpy as np
 import taichi as ti
+from .fields import FieldBlock
 
 
 @ti.data_oriented
@@ -44,10 +45,12 @@ class VoxelGrid:
         # a swept or hashed mesh moves: leave room for its boxes to grow (cloth folding, moving fast)
         room = 4.0 if (hashed or self.swept) else grow * grow
         self.pair_capacity = max(int(room * pairs) + 64, 64)
-        self.origin = ti.Vector.field(3, ti.f32, ())
-        self.cell_count = ti.field(ti.i32, n_cells)
-        self.cell_start = ti.field(ti.i32, n_cells + 1)
-        self.cell_triangles = ti.field(ti.i32, self.pair_capacity)
+        blk = FieldBlock()
+        self.origin = blk.vector(3, ti.f32, ())
+        self.cell_count = blk.scalar(ti.i32, n_cells)
+        self.cell_start = blk.scalar(ti.i32, n_cells + 1)
+        self.cell_triangles = blk.scalar(ti.i32, self.pair_capacity)
+        blk.finalize(self)
         self.n_pairs = 0
         self.build(vertices_np)
 

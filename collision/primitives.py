@@ -10,6 +10,9 @@ normal velocity removed, Coulomb friction on the rest).
 import numpy as np
 import taichi as ti
 
+from .base import ParticleCollider
+from .fields import FieldBlock
+
 
 @ti.func
 def _closest_on_segment(x, a, b):
@@ -19,7 +22,7 @@ def _closest_on_segment(x, a, b):
 
 
 @ti.data_oriented
-class PrimitiveColliders:
+class PrimitiveColliders(ParticleCollider):
     """spheres: list of (center (3,) [m], radius [m]); capsules: list of (a (3,), b (3,), radius); planes: list
     of (point (3,), normal (3,)). thickness [m] is the particle radius r_p; alpha the seed's push fraction
     (1 = fully out); friction the Coulomb coefficient. Fields hold the shapes so they can move (set_*)."""
@@ -32,10 +35,12 @@ class PrimitiveColliders:
             raise ValueError(f"alpha must lie in (0, 1], got {alpha}")
         self.thickness, self.alpha, self.friction = float(thickness), float(alpha), float(friction)
         self.n_spheres, self.n_capsules, self.n_planes = len(spheres), len(capsules), len(planes)
-        self.sphere = ti.Vector.field(4, ti.f32, max(len(spheres), 1))       # cx, cy, cz, r
-        self.capsule_a = ti.Vector.field(4, ti.f32, max(len(capsules), 1))   # ax, ay, az, r
-        self.capsule_b = ti.Vector.field(3, ti.f32, max(len(capsules), 1))
-        self.plane = ti.Vector.field(6, ti.f32, max(len(planes), 1))         # point, unit normal
+        blk = FieldBlock()
+        self.sphere = blk.vector(4, ti.f32, max(len(spheres), 1))       # cx, cy, cz, r
+        self.capsule_a = blk.vector(4, ti.f32, max(len(capsules), 1))   # ax, ay, az, r
+        self.capsule_b = blk.vector(3, ti.f32, max(len(capsules), 1))
+        self.plane = blk.vector(6, ti.f32, max(len(planes), 1))         # point, unit normal
+        blk.finalize(self)
         self.set_spheres(spheres)
         self.set_capsules(capsules)
         self.set_planes(planes)
@@ -65,22 +70,6 @@ class PrimitiveColliders:
             n = n / np.linalg.norm(n)
             self.planes_np.append((np.asarray(p, float), n))
             self.plane[k] = [*p, *n]
-
-    def attach(self, x, v, inv_mass, n_particles, contact_normal=None) -> None:
-        self.x, self.v, self.inv_mass, self.n_particles = x, v, inv_mass, n_particles
-        # optional (P,) vec3 field: the unit normal of each contact made, for the implicit integrators
-        self.contact_normal = contact_normal
-        self.records_contacts = contact_normal is not None
-        self.x_start = ti.Vector.field(3, x.dtype, x.shape[0])
-        self._attached = True
-
-    def begin_step(self) -> None:
-        self._copy_start()
-
-    @ti.kernel
-    def _copy_start(self):
-        for i in range(self.n_particles[None]):
-            self.x_start[i] = self.x[i]
 
     def resolve(self, dt: float) -> None:
         self._resolve()
@@ -137,19 +126,11 @@ class PrimitiveColliders:
                 moved = (q + push) - ti.cast(self.x[i], ti.f32)
                 if push.norm() > 0 or moved.norm() > 0:
                     self.x[i] = ti.cast(q + push, self.x.dtype)
-                    nrm = push.normalized(1e-20)
+                    nrm = ti.cast(push.normalized(1e-20), self.x.dtype)
                     if ti.static(self.records_contacts):
                         if push.norm() > 0:
-                            self.contact_normal[i] = ti.cast(nrm, self.x.dtype)
-                    vel = self.v[i]
-                    vn = vel.dot(ti.cast(nrm, self.x.dtype))
-                    if vn < 0:
-                        vt = vel - vn * ti.cast(nrm, self.x.dtype)
-                        vt_len = vt.norm()
-                        scale = 0.0
-                        if vt_len > 0:
-                            scale = ti.max(0.0, 1.0 - self.friction * (-vn) / vt_len)
-                        self.v[i] = scale * vt
+                            self.contact_normal[i] = nrm
+                    self.respond(i, nrm, ti.Vector.zero(self.x.dtype, 3), ti.cast(self.friction, self.x.dtype))
 
     def signed_distance(self, points) -> np.ndarray:
         """Signed distance [m] of points (N,3) to the union of the shapes, negative inside."""

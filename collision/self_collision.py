@@ -12,12 +12,14 @@ particle moves (one-sided): simple and stable, not momentum-exact; a scene turns
 import numpy as np
 import taichi as ti
 
+from .base import ParticleCollider
 from .geometry import inside_triangle
 from .grid import VoxelGrid
+from .fields import FieldBlock
 
 
 @ti.data_oriented
-class SelfCollision:
+class SelfCollision(ParticleCollider):
     """triangles (T,3) of the cloth and its rest positions (P,3) [m]; thickness [m] (default a quarter of the
     mean rest edge: with only particle-triangle tests, layers must keep apart by a good part of an edge or
     edges slip through each other); friction; cell_size [m] (default 1.5 x the mean rest edge);
@@ -38,31 +40,23 @@ class SelfCollision:
         self.triangles_np, self.rest_np = t, x
         self.cell_size = float(cell_size) if cell_size else 1.5 * mean_edge
         self.n_tri = len(t)
-        self.counters = ti.field(ti.i64, 3)  # candidates, corrections, overflows
+        blk = FieldBlock()
+        self.counters = blk.scalar(ti.i64, 3)  # candidates, corrections, overflows
+        blk.finalize(self)
 
-    def attach(self, x, v, inv_mass, n_particles, contact_normal=None) -> None:
-        # (contact_normal is accepted for a uniform interface; cloth-cloth contacts are not handed to the solver)
-        self.x, self.v, self.inv_mass, self.n_particles = x, v, inv_mass, n_particles
-        P = x.shape[0]
-        self.x_start = ti.Vector.field(3, x.dtype, P)
-        self.x_start.copy_from(x)  # the grid is built at once, on boxes swept from x_start to x
-        self.triangles = ti.Vector.field(3, ti.i32, self.n_tri)
+    def _on_attach(self) -> None:
+        # cloth-cloth contacts are not handed to the solver (contact_normal is left alone)
+        blk = FieldBlock()
+        self.triangles = blk.vector(3, ti.i32, self.n_tri)
+        self.n_triangles = blk.scalar(ti.i32, ())
+        self.cand = blk.scalar(ti.i32, (self.x.shape[0], self.max_candidates))
+        blk.finalize(self)
         self.triangles.from_numpy(self.triangles_np.astype(np.int32))
-        self.n_triangles = ti.field(ti.i32, ())
         self.n_triangles[None] = self.n_tri
-        self.cand = ti.field(ti.i32, (P, self.max_candidates))
-        self.grid = VoxelGrid(x, self.triangles, self.n_triangles, self.cell_size, pad=self.thickness, margin=0.0,
-                              vertices_np=self.rest_np, triangles_np=self.triangles_np, hashed=True,
+        # built at once, on boxes swept from x_start (= x now) to x
+        self.grid = VoxelGrid(self.x, self.triangles, self.n_triangles, self.cell_size, pad=self.thickness,
+                              margin=0.0, vertices_np=self.rest_np, triangles_np=self.triangles_np, hashed=True,
                               vertices_start=self.x_start)
-        self._attached = True
-
-    def begin_step(self) -> None:
-        self._copy_start()
-
-    @ti.kernel
-    def _copy_start(self):
-        for i in range(self.n_particles[None]):
-            self.x_start[i] = self.x[i]
 
     def resolve(self, dt: float) -> None:
         self.grid.build()
@@ -134,15 +128,7 @@ class SelfCollision:
                     tri = self.triangles[best]
                     v_tri = (self.v[tri[0]] + self.v[tri[1]] + self.v[tri[2]]) / 3.0
                     nrm = ti.cast(best_n * ti.math.sign(best_fix), self.x.dtype)
-                    rel = self.v[i] - v_tri
-                    vn = rel.dot(nrm)
-                    if vn < 0:
-                        vt = rel - vn * nrm
-                        vt_len = vt.norm()
-                        scale = 0.0
-                        if vt_len > 0:
-                            scale = ti.max(0.0, 1.0 - self.friction * (-vn) / vt_len)
-                        self.v[i] = v_tri + scale * vt
+                    self.respond(i, nrm, v_tri, ti.cast(self.friction, self.x.dtype))
 
     def describe(self) -> dict:
         return {"kind": "self"}

@@ -8,6 +8,7 @@ back, and the cloth stretches around every contact (we measured 30-260 % strain 
 h = 1/120 s; with the filter it stays at a few per cent). Built only when a scene has colliders.
 """
 import taichi as ti
+from collision.fields import FieldBlock
 
 
 @ti.data_oriented
@@ -16,7 +17,9 @@ class Contacts:
 
     def __init__(self, model):
         self.model = model
-        self.normal = ti.Vector.field(3, model.fp, model.capacity[0])
+        blk = FieldBlock()
+        self.normal = blk.vector(3, model.fp, model.capacity[0])
+        blk.finalize(self)
 
     def clear(self) -> None:
         self.normal.fill(0)

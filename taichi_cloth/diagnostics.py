@@ -5,6 +5,7 @@ from dataclasses import dataclass
 import taichi as ti
 
 from .builder import SpringKind
+from collision.fields import FieldBlock
 
 _KINETIC, _ELASTIC, _GRAVITY, _MAX_STRAIN, _MAX_SPEED, _NONFINITE = range(6)
 
@@ -34,7 +35,9 @@ class Measurement:
 class Diagnostics:
     def __init__(self, model, state, forces):
         self.model, self.state, self.forces = model, state, forces
-        self.out = ti.field(ti.f64, 6)
+        blk = FieldBlock()
+        self.out = blk.scalar(ti.f64, 6)
+        blk.finalize(self)
 
     def measure(self) -> Measurement:
         self._measure()

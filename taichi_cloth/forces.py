@@ -10,6 +10,7 @@ drag or wind writes a field and never recompiles.
 
 import numpy as np
 import taichi as ti
+from collision.fields import FieldBlock
 
 
 @ti.data_oriented
@@ -27,9 +28,11 @@ class ForceModel:
         self.model, self.state = model, state
         self.sources = tuple(sources)
         fp = model.fp
-        self.gravity = ti.Vector.field(3, fp, ())
-        self.air_damping = ti.field(fp, ())
-        self.f = ti.Vector.field(3, fp, model.capacity[0])
+        blk = FieldBlock()
+        self.gravity = blk.vector(3, fp, ())
+        self.air_damping = blk.scalar(fp, ())
+        self.f = blk.vector(3, fp, model.capacity[0])
+        blk.finalize(self)
         self.set_gravity(gravity)
         self.set_air_damping(air_damping)
 

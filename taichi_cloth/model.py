@@ -11,6 +11,7 @@ import taichi as ti
 
 from .builder import ClothData, SpringKind
 from .runtime import ensure_initialized
+from collision.fields import FieldBlock
 
 _PRECISIONS = {"f32": ti.f32, "f64": ti.f64}
 
@@ -60,25 +61,27 @@ class Model:
             raise ValueError(f"capacity {capacity} is below the cloth's size {(P, S, T)}")
         self.capacity = (cp, cs, ct)
         fp = self.fp
-        self.n_particles = ti.field(ti.i32, ())
-        self.n_springs = ti.field(ti.i32, ())
-        self.n_triangles = ti.field(ti.i32, ())
-        self.rest_x = ti.Vector.field(3, fp, cp)
-        self.mass = ti.field(fp, cp)
-        self.inv_mass = ti.field(fp, cp)
-        self.spring_a = ti.field(ti.i32, max(cs, 1))
-        self.spring_b = ti.field(ti.i32, max(cs, 1))
-        self.rest_length = ti.field(fp, max(cs, 1))
-        self.stiffness = ti.field(fp, max(cs, 1))
-        self.damping = ti.field(fp, max(cs, 1))
-        self.spring_kind = ti.field(ti.i32, max(cs, 1))
-        self.stiffness_sum = ti.field(fp, cp)
-        self.adj_offset = ti.field(ti.i32, cp + 1)
-        self.adj_spring = ti.field(ti.i32, max(2 * cs, 1))
-        self.adj_other = ti.field(ti.i32, max(2 * cs, 1))
-        self.triangles = ti.Vector.field(3, ti.i32, max(ct, 1))
-        self.tri_offset = ti.field(ti.i32, cp + 1)
-        self.tri_list = ti.field(ti.i32, max(3 * ct, 1))
+        blk = FieldBlock()
+        self.n_particles = blk.scalar(ti.i32, ())
+        self.n_springs = blk.scalar(ti.i32, ())
+        self.n_triangles = blk.scalar(ti.i32, ())
+        self.rest_x = blk.vector(3, fp, cp)
+        self.mass = blk.scalar(fp, cp)
+        self.inv_mass = blk.scalar(fp, cp)
+        self.spring_a = blk.scalar(ti.i32, max(cs, 1))
+        self.spring_b = blk.scalar(ti.i32, max(cs, 1))
+        self.rest_length = blk.scalar(fp, max(cs, 1))
+        self.stiffness = blk.scalar(fp, max(cs, 1))
+        self.damping = blk.scalar(fp, max(cs, 1))
+        self.spring_kind = blk.scalar(ti.i32, max(cs, 1))
+        self.stiffness_sum = blk.scalar(fp, cp)
+        self.adj_offset = blk.scalar(ti.i32, cp + 1)
+        self.adj_spring = blk.scalar(ti.i32, max(2 * cs, 1))
+        self.adj_other = blk.scalar(ti.i32, max(2 * cs, 1))
+        self.triangles = blk.vector(3, ti.i32, max(ct, 1))
+        self.tri_offset = blk.scalar(ti.i32, cp + 1)
+        self.tri_list = blk.scalar(ti.i32, max(3 * ct, 1))
+        blk.finalize(self)
         self.load(data)
 
     # ------------------------------------------------------------------ filling (host side, once)
@@ -200,8 +203,10 @@ class State:
 
     def __init__(self, model: Model):
         self.model = model
-        self.x = ti.Vector.field(3, model.fp, model.capacity[0])
-        self.v = ti.Vector.field(3, model.fp, model.capacity[0])
+        blk = FieldBlock()
+        self.x = blk.vector(3, model.fp, model.capacity[0])
+        self.v = blk.vector(3, model.fp, model.capacity[0])
+        blk.finalize(self)
         self.t = 0.0
         self.contacts = None  # a Contacts object when the scene has colliders
         self.reset()

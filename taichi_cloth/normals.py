@@ -1,6 +1,7 @@
 """Vertex normals of the cloth surface, computed in a Taichi kernel (used by wind and the recorder)."""
 import numpy as np
 import taichi as ti
+from collision.fields import FieldBlock
 
 
 @ti.data_oriented
@@ -11,8 +12,10 @@ class VertexNormals:
 
     def __init__(self, model, state):
         self.model, self.state = model, state
-        self.normal = ti.Vector.field(3, model.fp, model.capacity[0])
-        self.triangle_area = ti.Vector.field(3, model.fp, max(model.capacity[2], 1))  # area vectors [m^2]
+        blk = FieldBlock()
+        self.normal = blk.vector(3, model.fp, model.capacity[0])
+        self.triangle_area = blk.vector(3, model.fp, max(model.capacity[2], 1))  # area vectors [m^2]
+        blk.finalize(self)
 
     @ti.func
     def triangle_area_vector(self, t):

@@ -10,6 +10,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 import taichi as ti
+from collision.fields import FieldBlock
 
 
 class KeyframePath:
@@ -82,11 +83,13 @@ class PinDriver:
         grp = np.concatenate([np.full(len(g), k, np.int32) for k, (g, _) in enumerate(groups)])
         N, G = len(idx), len(groups)
         self.n = N
-        self.pin_index = ti.field(ti.i32, N)
-        self.pin_group = ti.field(ti.i32, N)
-        self.pin_origin = ti.Vector.field(3, model.fp, N)
-        self.group_offset = ti.Vector.field(3, model.fp, G)
-        self.group_velocity = ti.Vector.field(3, model.fp, G)
+        blk = FieldBlock()
+        self.pin_index = blk.scalar(ti.i32, N)
+        self.pin_group = blk.scalar(ti.i32, N)
+        self.pin_origin = blk.vector(3, model.fp, N)
+        self.group_offset = blk.vector(3, model.fp, G)
+        self.group_velocity = blk.vector(3, model.fp, G)
+        blk.finalize(self)
         self.pin_index.from_numpy(idx)
         self.pin_group.from_numpy(grp)
         self.pin_origin.from_numpy(model.data.positions[idx].astype(model._npfp))

@@ -13,6 +13,7 @@ import numpy as np
 import taichi as ti
 
 from .builder import SpringKind
+from collision.fields import FieldBlock
 
 
 @ti.data_oriented
@@ -36,8 +37,10 @@ class StretchLimit:
         self.max_strain, self.iterations = float(max_strain), int(iterations)
         self.tolerance, self.omega = float(tolerance), float(omega)
         self.kinds = tuple(SpringKind(k) for k in kinds)
-        self.limited = ti.field(ti.i32, max(model.capacity[1], 1))
-        self.dx = ti.Vector.field(3, model.fp, model.capacity[0])
+        blk = FieldBlock()
+        self.limited = blk.scalar(ti.i32, max(model.capacity[1], 1))
+        self.dx = blk.vector(3, model.fp, model.capacity[0])
+        blk.finalize(self)
         self.stats = {"stretch_passes": 0, "stretch_unconverged_steps": 0}
         self.refresh()
 

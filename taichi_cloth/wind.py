@@ -13,6 +13,7 @@ import numpy as np
 import taichi as ti
 
 from .normals import VertexNormals
+from collision.fields import FieldBlock
 
 
 @ti.data_oriented
@@ -30,8 +31,10 @@ class Wind:
         self.base_velocity = np.asarray(velocity, dtype=np.float64).reshape(3)
         self.gust, self.gust_frequency = float(gust), float(gust_frequency)
         self.normals = VertexNormals(model, state)
-        self.velocity = ti.Vector.field(3, model.fp, ())
-        self.coefficient = ti.field(model.fp, ())
+        blk = FieldBlock()
+        self.velocity = blk.vector(3, model.fp, ())
+        self.coefficient = blk.scalar(model.fp, ())
+        blk.finalize(self)
         self.coefficient[None] = float(coefficient)
         self.prepare_velocity(0.0)
 

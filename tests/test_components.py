@@ -1,4 +1,6 @@
 """A scene builds and compiles only what it names; changing a parameter never recompiles."""
+import taichi as ti
+
 import taichi_cloth as tc
 
 
@@ -44,3 +46,26 @@ def test_changing_parameters_does_not_recompile():
         sc.reset()
         sc.step(5)
     assert cc.total == 0, cc.compiled
+
+
+def test_field_blocks_of_dead_owners_are_recycled():
+    """Taichi crashes after ~500 SNode trees; blocks of collected owners are destroyed before that happens."""
+    import gc
+
+    import numpy as np
+
+    from collision import fields
+
+    class Owner:
+        pass
+
+    for _ in range(700):
+        owner = Owner()
+        blk = fields.FieldBlock()
+        f = blk.scalar(ti.f32, 8)
+        blk.finalize(owner)
+        f.from_numpy(np.arange(8, dtype=np.float32))
+        assert f.to_numpy()[7] == 7.0
+        del owner, blk, f
+        gc.collect()
+    assert fields._live <= fields.LIVE_TREE_LIMIT + 2

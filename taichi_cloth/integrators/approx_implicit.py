@@ -28,6 +28,7 @@ import warnings
 import taichi as ti
 
 from .base import Integrator, Option, at_least_one
+from collision.fields import FieldBlock
 
 
 @ti.data_oriented
@@ -49,25 +50,18 @@ class ApproxImplicit(Integrator):
             warnings.warn("approx-implicit with more than 2 sweeps and no jv_term is known to go unstable "
                           "on cloth (ALGORITHMS.md 1.1, surprise 2); set jv_term = true", stacklevel=2)
         P = model.capacity[0]
-        self.rhs = ti.Vector.field(3, model.fp, P)      # h f (+ h^2 J~ v) [kg m/s]
-        self.inv_diag = ti.field(model.fp, P)           # 1 / (m + h^2 sum k) [1/kg]
-        self.dv = ti.Vector.field(3, model.fp, (2, P))  # ping-pong Jacobi iterates [m/s]; row 0 keeps the last dv
+        blk = FieldBlock()
+        self.rhs = blk.vector(3, model.fp, P)      # h f (+ h^2 J~ v) [kg m/s]
+        self.inv_diag = blk.scalar(model.fp, P)           # 1 / (m + h^2 sum k) [1/kg]
+        self.dv = blk.vector(3, model.fp, (2, P))  # ping-pong Jacobi iterates [m/s]; row 0 keeps the last dv
+        blk.finalize(self)
         # sweeps and warm start are fixed per integrator: the sweeps unroll into one kernel (one launch per step)
-        self.contacts = state.contacts
-        self.has_contacts = state.contacts is not None
         self.warm = bool(self.options["warm_start"])
         self.extra_sweeps = self.options["sweeps"] - (0 if self.warm else 1)
         self.reset()
 
     def reset(self) -> None:
         self.dv.fill(0)
-
-    @ti.func
-    def _filter(self, i, vec):
-        out = vec
-        if ti.static(self.has_contacts):
-            out = self.contacts.filter(i, vec)
-        return out
 
     @ti.kernel
     def _advance(self, dt: ti.f64):
@@ -89,14 +83,14 @@ class ApproxImplicit(Integrator):
                 self.rhs[i] = rhs
                 self.inv_diag[i] = inv_diag
                 if ti.static(not self.warm):
-                    self.dv[0, i] = self._filter(i, rhs * inv_diag)  # sweep 1 from dv = 0
+                    self.dv[0, i] = self.contact_filter(i, rhs * inv_diag)  # sweep 1 from dv = 0
         for k in ti.static(range(self.extra_sweeps)):
             for i in range(m.n_particles[None]):
                 if m.inv_mass[i] != 0:
                     acc = ti.Vector.zero(m.fp, 3)
                     for e in range(m.adj_offset[i], m.adj_offset[i + 1]):
                         acc += m.stiffness[m.adj_spring[e]] * self.dv[k % 2, m.adj_other[e]]
-                    self.dv[(k + 1) % 2, i] = self._filter(i, (self.rhs[i] + h * h * acc) * self.inv_diag[i])
+                    self.dv[(k + 1) % 2, i] = self.contact_filter(i, (self.rhs[i] + h * h * acc) * self.inv_diag[i])
         last = ti.static(self.extra_sweeps % 2)
         for i in range(m.n_particles[None]):
             if m.inv_mass[i] != 0:

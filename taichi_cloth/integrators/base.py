@@ -4,6 +4,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, Callable, ClassVar
 
+import taichi as ti
+
 
 @dataclass(frozen=True)
 class Option:
@@ -23,6 +25,7 @@ def at_least_one(v):
     return None if v >= 1 else "must be >= 1"
 
 
+@ti.data_oriented
 class Integrator:
     """Base class. Subclasses set `name`, `OPTIONS`, `unconditionally_stable` and implement `_advance(dt)`.
 
@@ -51,6 +54,17 @@ class Integrator:
             self.options[k] = v
         #: cumulative counters worth reporting (e.g. CG iterations); a run reports their mean per step
         self.stats: dict[str, float] = {}
+        self.contacts = state.contacts
+        self.has_contacts = state.contacts is not None  # compile-time: no colliders, no contact code
+
+    @ti.func
+    def contact_filter(self, i, vec):
+        """vec without its component along particle i's last contact normal (BW98's constraint filter);
+        vec itself when the scene has no colliders or i touched none."""
+        out = vec
+        if ti.static(self.has_contacts):
+            out = self.contacts.filter(i, vec)
+        return out
 
     def step(self, dt: float) -> None:
         """Advance the state by dt [s]: forces are prepared for time t, then the scheme's own update."""

@@ -18,6 +18,7 @@ import math
 import taichi as ti
 
 from .base import Integrator, Option, at_least_one, positive
+from collision.fields import FieldBlock
 
 
 @ti.data_oriented
@@ -37,16 +38,16 @@ class Implicit(Integrator):
         super().__init__(model, state, forces, **options)
         fp = model.fp
         P, S = model.capacity[0], max(model.capacity[1], 1)
-        self.spring_u = ti.Vector.field(3, fp, S)  # unit direction a -> b
-        self.spring_axial = ti.field(fp, S)         # h kd + h^2 k (1 - g)   [kg/s]
-        self.spring_iso = ti.field(fp, S)           # h^2 k g                 [kg]
-        self.b = ti.Vector.field(3, fp, P)
-        self.inv_diag = ti.Vector.field(3, fp, P)
-        self.dv, self.r, self.z, self.p, self.q = (ti.Vector.field(3, fp, P) for _ in range(5))
-        self.cg = ti.field(ti.f64, 7)               # CG scalars (see the indices above), kept on the device
+        blk = FieldBlock()
+        self.spring_u = blk.vector(3, fp, S)  # unit direction a -> b
+        self.spring_axial = blk.scalar(fp, S)         # h kd + h^2 k (1 - g)   [kg/s]
+        self.spring_iso = blk.scalar(fp, S)           # h^2 k g                 [kg]
+        self.b = blk.vector(3, fp, P)
+        self.inv_diag = blk.vector(3, fp, P)
+        self.dv, self.r, self.z, self.p, self.q = (blk.vector(3, fp, P) for _ in range(5))
+        self.cg = blk.scalar(ti.f64, 7)               # CG scalars (see the indices above), kept on the device
+        blk.finalize(self)
         self.stats = {"cg_iterations": 0, "cg_unconverged_steps": 0}
-        self.contacts = state.contacts
-        self.has_contacts = state.contacts is not None  # compile-time: no colliders, no filter code
         self.last_residual = 0.0  # sqrt(r.Pr / b.Pb) at the end of the last step
 
     def _advance(self, dt: float) -> None:
@@ -62,13 +63,6 @@ class Implicit(Integrator):
         self.last_residual = math.sqrt(max(delta, 0.0) / delta0) if delta0 > 0 else 0.0
         self.stats["cg_iterations"] += int(it)
         self.stats["cg_unconverged_steps"] += int(self.last_residual > self.options["cg_tolerance"])
-
-    @ti.func
-    def _filter(self, i, vec):
-        out = vec
-        if ti.static(self.has_contacts):
-            out = self.contacts.filter(i, vec)
-        return out
 
     @ti.func
     def _product(self, i, vec: ti.template()):
@@ -116,11 +110,11 @@ class Implicit(Integrator):
                     axial_k = self.spring_axial[sp] - h * m.damping[sp]
                     kv += axial_k * u.dot(dvel) * u + self.spring_iso[sp] * dvel
                     diag += self.spring_axial[sp] * u * u + self.spring_iso[sp]
-                b = self._filter(i, h * f - kv)
+                b = self.contact_filter(i, h * f - kv)
                 self.b[i] = b
                 self.inv_diag[i] = 1.0 / diag
                 self.r[i] = b
-                z = self._filter(i, b * self.inv_diag[i])
+                z = self.contact_filter(i, b * self.inv_diag[i])
                 self.z[i] = z
                 self.p[i] = zero
                 delta += ti.cast(b.dot(z), ti.f64)
@@ -148,7 +142,7 @@ class Implicit(Integrator):
             for i in range(m.n_particles[None]):
                 q = ti.Vector.zero(m.fp, 3)
                 if m.inv_mass[i] != 0 and cg[self._ACTIVE] != 0:
-                    q = self._filter(i, m.mass[i] * mass_scale * self.p[i] + self._product(i, self.p))
+                    q = self.contact_filter(i, m.mass[i] * mass_scale * self.p[i] + self._product(i, self.p))
                 self.q[i] = q
                 pq += ti.cast(self.p[i].dot(q), ti.f64)
             alpha = ti.cast(0.0, ti.f64)
@@ -161,7 +155,7 @@ class Implicit(Integrator):
                     self.dv[i] += a * self.p[i]
                     r = self.r[i] - a * self.q[i]
                     self.r[i] = r
-                    z = self._filter(i, r * self.inv_diag[i])
+                    z = self.contact_filter(i, r * self.inv_diag[i])
                     self.z[i] = z
                     delta_new += ti.cast(r.dot(z), ti.f64)
             if cg[self._ACTIVE] != 0:
