@@ -16,8 +16,6 @@ import statistics
 import time
 from pathlib import Path
 
-import numpy as np
-
 CELL_FACTORS = (0.75, 1.0, 1.5, 2.0, 3.0, 4.0)  # x the mannequin's mean edge
 
 
@@ -40,7 +38,7 @@ def _record(n: int, settle: float, steps: int):
     scene.step(int(round(settle / scene.dt)))
     frames = []
     for _ in range(steps):
-        x0, v0 = scene.positions(), scene.velocities()
+        x0 = scene.positions()
         scene.colliders[0].begin_step()
         scene.integrator.step(scene.dt)  # the integrator alone: its end state is what collision must resolve
         frames.append((x0, scene.positions(), scene.velocities()))
@@ -83,7 +81,6 @@ def run(args) -> int:
     from collision import MeshCollider
 
     from . import runtime
-    from .bench import hanging_cloth  # noqa: F401 (same runtime conventions)
 
     runtime.init(args.arch)
     out = Path(args.out)

@@ -11,7 +11,9 @@ class SceneError(TaichiClothError, ValueError):
 
 # A mesh is unusable (missing, empty, non-manifold, NaN vertices, degenerate faces): the message names the file.
 # Defined by the collision package (which loads bodies and cloth meshes and must not import taichi_cloth).
-from collision.errors import MeshError  # noqa: E402,F401
+from collision.errors import MeshError  # noqa: E402
+
+__all__ = ["BlowUpError", "MeshError", "SceneError", "TaichiClothError"]
 
 
 class BlowUpError(TaichiClothError, RuntimeError):

@@ -7,7 +7,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from collision.meshes import load_triangle_mesh, triangle_areas, validate_triangle_mesh  # noqa: F401 (re-export)
+from collision.meshes import load_triangle_mesh, triangle_areas, validate_triangle_mesh
+
+__all__ = ["edges_of", "interior_edge_opposites", "load_triangle_mesh", "triangle_areas", "validate_triangle_mesh"]
 
 
 def edges_of(triangles: np.ndarray):

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 import taichi as ti
 
-from .builder import ClothData, SpringKind
+from .builder import ClothData
 from .runtime import ensure_initialized
 from collision.fields import FieldBlock
 

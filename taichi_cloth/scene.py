@@ -13,7 +13,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import taichi as ti
 
 from .builder import ClothData
 from .colliders import build_colliders

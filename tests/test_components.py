@@ -57,7 +57,7 @@ def test_field_blocks_of_dead_owners_are_recycled():
     from collision import fields
 
     class Owner:
-        pass
+        """Anything whose lifetime a block follows."""
 
     for _ in range(700):
         owner = Owner()
