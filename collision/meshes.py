@@ -20,10 +20,21 @@ def triangle_areas(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     return 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
 
 
+def edges_of(triangles: np.ndarray):
+    """Unique undirected edges of a triangle list.
+
+    Returns edges (E,2) int64 with edges[:,0] < edges[:,1]; face_edge (T,3), the id of the edge
+    from corner k to corner k+1 of each triangle; counts (E,), how many triangles share each edge.
+    """
+    t = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
+    half = np.sort(t[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    edges, inverse, counts = np.unique(half, axis=0, return_inverse=True, return_counts=True)
+    return edges, inverse.reshape(-1, 3), counts
+
+
 def edge_face_counts(triangles: np.ndarray) -> np.ndarray:
     """How many triangles share each undirected edge; shape (E,)."""
-    half = np.sort(np.asarray(triangles, dtype=np.int64)[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
-    return np.unique(half, axis=0, return_counts=True)[1]
+    return edges_of(triangles)[2]
 
 
 def mesh_problems(vertices, triangles) -> dict:

@@ -1,6 +1,13 @@
-"""Multilevel 4-8 meshes (seed 000 section 2.2): the hierarchy, settle criteria and prolongation kernels.
+"""Multilevel 4-8 meshes (seed 000 section 2.2): the hierarchy, prolongation kernels, and the hierarchy as a
+multigrid solver.
 
-Works on plain Taichi fields and numpy arrays and does not import taichi_cloth, so it can be tested
-alone; taichi_cloth.Scene composes it when a scene names [multilevel]. Nothing is implemented yet
-(tracked as the multilevel issue); importing it builds and compiles nothing.
+  hierarchy   the 4-8 hierarchy of a rectangle (base grid with alternating diagonals, bisection of every
+              diamond), parent / diamond / prolongation tables, conformity checks (numpy)
+  outline     the same for an arbitrary pattern outline: a 4-8 interior and a re-triangulated boundary band
+  prolong     the Taichi kernel that refills positions and velocities on a refined level, in place
+  multigrid   V-cycles over the levels for the approximate implicit system (Jacobi smoother)
+
+Works on plain Taichi fields and numpy arrays and does not import taichi_cloth, so it can be tested alone;
+taichi_cloth.Scene composes it when a scene's cloth is a multilevel one ([multilevel] in a scene file).
+Importing it builds and compiles nothing.
 """

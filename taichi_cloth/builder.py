@@ -139,13 +139,30 @@ class ClothBuilder:
         return ClothData(positions, mass, springs, rest, stiffness, damping, kind, triangles, (nu, nv))
 
     @staticmethod
-    def triangle_mesh(vertices, triangles, material: str | Material = "cotton", source: str = "mesh") -> ClothData:
+    def multilevel_grid(size=(1.0, 1.0), base_cells=(4, 4), levels: int = 5, material: str | Material = "cotton",
+                        center=(0.0, 0.0, 0.0), plane: str = "xy", start_level: int = 0):
+        """A W x H [m] rectangle as a multilevel 4-8 hierarchy (a MultilevelCloth: one ClothData per level):
+        a base of (nx, ny) cells with alternating diagonals, refined levels-1 times by bisecting every
+        triangle across its hypotenuse. A Scene starts it on `start_level` (0-based) and refines as it settles.
+        See taichi_cloth.multilevel_cloth."""
+        from .multilevel_cloth import multilevel_grid
+
+        return multilevel_grid(size, base_cells, levels, material, center, plane, start_level)
+
+    @staticmethod
+    def triangle_mesh(vertices, triangles, material: str | Material = "cotton", source: str = "mesh",
+                      stiffness_rule: str = "edge-area") -> ClothData:
         """A cloth from any manifold triangle mesh (vertices (V,3) [m], triangles (T,3)).
 
-        Structural springs on every edge with k = stretch * A_e / L0^2 (A_e = area of the triangles sharing
-        the edge, Van Gelder's weighting); bend springs across every interior edge between its two opposite
+        Structural springs on every edge; bend springs across every interior edge between its two opposite
         vertices with k = bend / L0^2; masses density * (adjacent area) / 3. No shear springs: the triangle
-        edges already resist shear.
+        edges already resist shear. The structural constant follows `stiffness_rule`:
+          "edge-area": k = stretch * A_e / L0^2 (A_e = area of the triangles sharing the edge; Van Gelder);
+          "isotropic": k = sum over the edge's triangles t of 3 E A_t / (sum of t's squared edge lengths),
+                       E = material.sheet_modulus. Every edge of a right isosceles (4-8) or an equilateral
+                       lattice then gets the same constant, which makes the lattice isotropic with Young's
+                       modulus exactly E and Poisson's ratio 1/3 (the Cauchy relation of central springs),
+                       so the 45-degree-rotated odd 4-8 levels are the same material as the even ones.
         """
         mat = as_material(material)
         v = np.asarray(vertices, dtype=np.float64)
@@ -158,13 +175,21 @@ class ClothBuilder:
             raise ValueError(f"{source}: {int(np.sum(mass == 0))} vertices belong to no triangle")
         mass *= mat.density
         edges, face_edge, _ = edges_of(t)
-        edge_area = np.zeros(len(edges))
-        np.add.at(edge_area, face_edge.reshape(-1), np.repeat(area, 3))
         L = np.linalg.norm(v[edges[:, 1]] - v[edges[:, 0]], axis=1)
+        if stiffness_rule == "edge-area":
+            edge_area = np.zeros(len(edges))
+            np.add.at(edge_area, face_edge.reshape(-1), np.repeat(area, 3))
+            k_edge = mat.stretch * edge_area / L**2
+        elif stiffness_rule == "isotropic":
+            per_triangle = 3.0 * mat.sheet_modulus * area / (L[face_edge] ** 2).sum(axis=1)
+            k_edge = np.zeros(len(edges))
+            np.add.at(k_edge, face_edge.reshape(-1), np.repeat(per_triangle, 3))
+        else:
+            raise ValueError(f"stiffness_rule must be 'edge-area' or 'isotropic', got {stiffness_rule!r}")
         bend_pairs = interior_edge_opposites(t)
         Lb = np.linalg.norm(v[bend_pairs[:, 1]] - v[bend_pairs[:, 0]], axis=1) if len(bend_pairs) else np.zeros(0)
         springs, rest, stiffness, damping, kind = _spring_arrays(
-            [edges, bend_pairs], [mat.stretch * edge_area / L**2, mat.bend / np.maximum(Lb, 1e-12) ** 2],
+            [edges, bend_pairs], [k_edge, mat.bend / np.maximum(Lb, 1e-12) ** 2],
             [SpringKind.STRUCTURAL, SpringKind.BEND], v, mat.damping)
         return ClothData(v, mass, springs, rest, stiffness, damping, kind, t)
 

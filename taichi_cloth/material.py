@@ -43,6 +43,15 @@ class Material:
             if getattr(self, name) < 0:
                 raise ValueError(f"material {name} must be >= 0, got {getattr(self, name)}")
 
+    @property
+    def sheet_modulus(self) -> float:
+        """Young's modulus of the sheet [N/m] under uniaxial stress along a grid axis, for the square grid's
+        springs (stretch on the edges, shear on both diagonals): C11 - C12^2 / C11 with C11 = stretch + shear,
+        C12 = shear. Isotropic meshes (4-8 levels, ClothBuilder.triangle_mesh(..., stiffness_rule="isotropic"))
+        are given this modulus, so the same material responds alike on a grid and on a 4-8 level."""
+        c11 = self.stretch + self.shear
+        return c11 - self.shear ** 2 / c11 if c11 > 0 else 0.0
+
     def replace(self, **changes) -> "Material":
         return dataclasses.replace(self, **changes)
 

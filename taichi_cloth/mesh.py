@@ -7,22 +7,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from collision.meshes import load_triangle_mesh, triangle_areas, validate_triangle_mesh
+from collision.meshes import edges_of, load_triangle_mesh, triangle_areas, validate_triangle_mesh
 
 __all__ = ["edges_of", "interior_edge_opposites", "load_triangle_mesh", "triangle_areas", "validate_triangle_mesh"]
-
-
-def edges_of(triangles: np.ndarray):
-    """Unique undirected edges of a triangle list.
-
-    Returns edges (E,2) int64 with edges[:,0] < edges[:,1]; face_edge (T,3), the id of the edge
-    from corner k to corner k+1 of each triangle; counts (E,), how many triangles share each edge.
-    """
-    t = np.asarray(triangles, dtype=np.int64)
-    half = np.stack([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]], axis=1).reshape(-1, 2)
-    half.sort(axis=1)
-    edges, inverse, counts = np.unique(half, axis=0, return_inverse=True, return_counts=True)
-    return edges, inverse.reshape(-1, 3), counts
 
 
 def interior_edge_opposites(triangles: np.ndarray) -> np.ndarray:

@@ -160,22 +160,31 @@ class Model:
 
     def stiffness_sum_np(self) -> np.ndarray:
         """(P,) sum of the spring constants at each particle [N/m]."""
-        d = self.data
-        return np.bincount(d.springs.reshape(-1), np.repeat(d.stiffness, 2), minlength=d.n_particles)
+        return stiffness_sum(self.data)
 
     def omega_max_bound(self) -> float:
         """Gershgorin upper bound [rad/s] on the highest linear frequency: sqrt(max_i 2 sum_j k_ij / m_i)
         over free particles (ALGORITHMS.md 1.4). 0 if every particle is pinned."""
-        free = ~self.pinned
-        if not free.any():
-            return 0.0
-        return float(np.sqrt(np.max(2.0 * self.stiffness_sum_np()[free] / self.data.mass[free])))
+        return omega_max_bound(self.data, self.pinned)
 
     def damping_ratio_max(self) -> float:
         """max over springs of kd/k [s] (stiffness-proportional damping)."""
         k, kd = self.data.stiffness, self.data.damping
         r = np.divide(kd, k, out=np.zeros_like(k), where=k > 0)
         return float(r.max()) if len(r) else 0.0
+
+
+def stiffness_sum(data: ClothData) -> np.ndarray:
+    """(P,) sum of the spring constants at each particle of `data` [N/m]."""
+    return np.bincount(data.springs.reshape(-1), np.repeat(data.stiffness, 2), minlength=data.n_particles)
+
+
+def omega_max_bound(data: ClothData, pinned: np.ndarray) -> float:
+    """Gershgorin bound [rad/s], sqrt(max_i 2 sum_j k_ij / m_i) over the particles not `pinned` ((P,) bool)."""
+    free = ~np.asarray(pinned, dtype=bool)
+    if not free.any():
+        return 0.0
+    return float(np.sqrt(np.max(2.0 * stiffness_sum(data)[free] / data.mass[free])))
 
 
 def _fill(f, values: np.ndarray) -> None:

@@ -74,15 +74,15 @@ class PinDriver:
     """Moves the particles of the pin groups that have a path. Built only when one does.
 
     pin_index (N,) i32, pin_origin (N,) vec3 [m], pin_group (N,) i32; group_offset / group_velocity (G,) vec3.
+    N is a capacity (`capacity`, default the groups' size) with a live count, so that a refined level can
+    reload larger groups in place (`load`) without recompiling.
     """
 
-    def __init__(self, model, state, groups: list[tuple[np.ndarray, Callable]]):
+    def __init__(self, model, state, groups: list[tuple[np.ndarray, Callable]], capacity: int | None = None):
         self.model, self.state = model, state
         self.paths = [path for _, path in groups]
-        idx = np.concatenate([g for g, _ in groups]).astype(np.int32)
-        grp = np.concatenate([np.full(len(g), k, np.int32) for k, (g, _) in enumerate(groups)])
-        N, G = len(idx), len(groups)
-        self.n = N
+        N = max(int(capacity or 0), sum(len(g) for g, _ in groups))
+        G = len(groups)
         blk = FieldBlock()
         self.pin_index = blk.scalar(ti.i32, N)
         self.pin_group = blk.scalar(ti.i32, N)
@@ -90,9 +90,24 @@ class PinDriver:
         self.group_offset = blk.vector(3, model.fp, G)
         self.group_velocity = blk.vector(3, model.fp, G)
         blk.finalize(self)
-        self.pin_index.from_numpy(idx)
-        self.pin_group.from_numpy(grp)
-        self.pin_origin.from_numpy(model.data.positions[idx].astype(model._npfp))
+        self.capacity = N
+        self.load([g for g, _ in groups])
+
+    def load(self, indices: list[np.ndarray]) -> None:
+        """(Re)fill the groups' particle indices (one array per group, same order as the paths); the
+        origins are the model's current rest positions."""
+        if len(indices) != len(self.paths):
+            raise ValueError(f"expected {len(self.paths)} pin groups, got {len(indices)}")
+        idx = np.concatenate(indices).astype(np.int32)
+        if len(idx) > self.capacity:
+            raise ValueError(f"{len(idx)} moving pins exceed the driver's capacity {self.capacity}")
+        grp = np.concatenate([np.full(len(g), k, np.int32) for k, g in enumerate(indices)])
+        self.n = len(idx)
+        pad = self.capacity - self.n
+        self.pin_index.from_numpy(np.pad(idx, (0, pad)))
+        self.pin_group.from_numpy(np.pad(grp, (0, pad)))
+        origin = self.model.data.positions[idx].astype(self.model._npfp)
+        self.pin_origin.from_numpy(np.pad(origin, ((0, pad), (0, 0))))
 
     def apply(self, t: float, dt: float | None) -> None:
         """Place the moving pins at their offset for time t [s]; their velocity is the path's finite
@@ -102,11 +117,11 @@ class PinDriver:
             vel = (off - np.asarray(path(t - dt), dtype=np.float64)) / dt if dt else np.zeros(3)
             self.group_offset[g] = off.tolist()
             self.group_velocity[g] = vel.tolist()
-        self._place()
+        self._place(self.n)
 
     @ti.kernel
-    def _place(self):
-        for p in range(self.n):
+    def _place(self, n: ti.i32):
+        for p in range(n):
             i = self.pin_index[p]
             g = self.pin_group[p]
             self.state.x[i] = self.pin_origin[p] + self.group_offset[g]
@@ -114,4 +129,4 @@ class PinDriver:
 
     def positions(self) -> np.ndarray:
         """(N,3) current positions of the moving pins [m]."""
-        return self.state.positions()[self.pin_index.to_numpy()]
+        return self.state.positions()[self.pin_index.to_numpy()[: self.n]]

@@ -1,7 +1,8 @@
 """Recorder: every Rerun call of the engine lives here (rerun-sdk 0.41).
 
 One explicit RecordingStream saved to an .rrd file as it goes (so a run that fails midway keeps what
-it recorded). The mesh topology is logged once as static data; each frame logs only the vertex
+it recorded). The mesh topology is logged once as static data (for a multilevel cloth: on the timeline,
+again at every level switch, with a metrics/<entity>/level series and an event); each frame logs only the vertex
 positions and normals (Rerun's partial-update pattern). Timelines: "frame" (sequence) and
 "sim_time" (duration, s). Scalars live under metrics/<entity>/...: energy (three series: kinetic,
 potential, total [J]), strain/max, perf/steps_per_s. Open a recording with `rerun FILE.rrd`.
@@ -50,14 +51,31 @@ class Recorder:
         rec = self.stream
         if translation is not None:
             rec.log(entity, rr.Transform3D(translation=np.asarray(translation, np.float32)), static=True)
+        rec.log(f"metrics/{entity}/energy", rr.SeriesLines(names=["kinetic", "potential", "total"]), static=True)
+        if scene.refiner is None:
+            self._log_topology(entity, scene, static=True)
+        else:  # the topology changes at each level switch: log it on the timeline
+            rec.log(f"metrics/{entity}/level", rr.SeriesLines(names="level"), static=True)
+            self.log_topology(entity, scene, 0)
+
+    def log_topology(self, entity: str, scene, frame: int) -> None:
+        """The cloth's triangles (and fixed pins) as of `frame`: logged at a multilevel switch."""
+        self.stream.set_time("frame", sequence=frame)
+        self.stream.set_time("sim_time", duration=scene.state.t)
+        self._log_topology(entity, scene, static=False)
+        if frame > 0:
+            self.log_event(entity, scene, frame, f"level {scene.level + 1}: {scene.model.data.n_particles} particles, "
+                                                 f"{scene.model.data.n_springs} springs", level="INFO")
+
+    def _log_topology(self, entity: str, scene, static: bool) -> None:
+        rec = self.stream
         tri = scene.model.data.triangles
         if len(tri):
             rec.log(f"{entity}/mesh", rr.Mesh3D.from_fields(triangle_indices=tri.astype(np.uint32),
-                                                            albedo_factor=CLOTH_COLOR), static=True)
-        rec.log(f"metrics/{entity}/energy", rr.SeriesLines(names=["kinetic", "potential", "total"]), static=True)
+                                                            albedo_factor=CLOTH_COLOR), static=static)
         if len(scene.pinned_indices) and scene.pins is None:
             rec.log(f"{entity}/pins", rr.Points3D(scene.model.data.positions[scene.pinned_indices].astype(np.float32),
-                                                  radii=0.01, colors=PIN_COLOR), static=True)
+                                                  radii=0.01, colors=PIN_COLOR), static=static)
 
     def log_collider(self, entity: str, description: dict) -> None:
         """A collider, once, as static data: a body mesh, spheres, capsules and planes (a 4 m square)."""
@@ -106,6 +124,8 @@ class Recorder:
         metrics = f"metrics/{entity}"
         rec.log(f"{metrics}/energy", rr.Scalars([m.kinetic, m.potential, m.total]))
         rec.log(f"{metrics}/strain/max", rr.Scalars(m.max_strain))
+        if scene.refiner is not None:
+            rec.log(f"{metrics}/level", rr.Scalars(scene.level + 1))
         if steps_per_s is not None:
             rec.log(f"{metrics}/perf/steps_per_s", rr.Scalars(steps_per_s))
         self.frames_logged += 1

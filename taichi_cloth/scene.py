@@ -21,7 +21,8 @@ from .diagnostics import Diagnostics, Measurement
 from .errors import BlowUpError, SceneError
 from .forces import ForceModel
 from .integrators import integrator_class
-from .model import Model, State
+from .model import Model, State, omega_max_bound
+from .multilevel_cloth import MultilevelCloth
 from .normals import VertexNormals
 from .pins import PinDriver, PinSpec
 from .stability import stable_dt
@@ -51,6 +52,7 @@ class RunSummary:
     max_strain_seen: float = 0.0
     stats: dict = field(default_factory=dict)
     blowup: str | None = None
+    levels: list = field(default_factory=list)  # LevelSwitch history of a multilevel cloth
     outputs: list[str] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
 
@@ -80,6 +82,8 @@ class RunSummary:
                          f"(elastic {f.elastic:.4g}, gravity {f.gravity:.4g}), total {f.total:.4g} J")
             lines.append(f"  max strain: {100 * f.max_strain:.2f} % now, {100 * self.max_strain_seen:.2f} % peak; "
                          f"max speed {f.max_speed:.3g} m/s")
+        if self.levels:
+            lines.append("  levels: " + " -> ".join(f"{s.level + 1} (t = {s.t:.3g} s)" for s in self.levels))
         for k, v in self.stats.items():
             lines.append(f"  {k}: {v:.4g}")
         for w in self.warnings:
@@ -93,7 +97,8 @@ class RunSummary:
 class Scene:
     """A cloth, an integrator and only the components named.
 
-    cloth:              ClothData (from ClothBuilder) or a Model
+    cloth:              ClothData (from ClothBuilder), a Model, or a MultilevelCloth (ClothBuilder.multilevel_grid):
+                        the scene then starts on its start level and refines as the drape settles
     integrator:         "explicit" | "verlet" | "central-difference" | "approx-implicit" | "implicit"
     dt:                 time step [s]
     integrator_options: dict of the integrator's OPTIONS
@@ -105,6 +110,9 @@ class Scene:
                         (MeshCollider, PrimitiveColliders); resolved after every step, in order
     self_collision:     False, True, or SelfCollision keyword arguments (thickness, friction): the cloth
                         against its own triangles, resolved before the colliders
+    multilevel:         for a MultilevelCloth: SettleCriterion keyword arguments (max_speed, energy_change,
+                        window, max_time), refine (False: stay on the start level) and dt_growth (time step
+                        multiplier per level below the finest; dt is the finest level's step; default 1)
     fps:                frames per simulated second for run() and recording; substeps = round(1/(fps dt))
     step_guard:         what to do when an explicit integrator's dt exceeds its stable bound: warn/refuse/off
     max_speed [m/s], max_strain [-]: beyond these (or at any NaN) a run is declared blown up
@@ -113,7 +121,7 @@ class Scene:
     def __init__(self, cloth: ClothData | Model, *, name: str = "cloth", integrator: str = "approx-implicit",
                  dt: float = 1.0 / 240.0, integrator_options: dict | None = None, gravity=(0.0, -9.81, 0.0),
                  air_damping: float = 0.1, pins=(), wind: dict | None = None, stretch_limit: dict | None = None,
-                 colliders=(), self_collision=False, fps: float = 60.0, precision: str = "f32", step_guard: str = "warn",
+                 colliders=(), self_collision=False, multilevel: dict | None = None, fps: float = 60.0, precision: str = "f32", step_guard: str = "warn",
                  max_speed: float = 200.0, max_strain: float = 10.0, base_dir=None):
         if not dt > 0 or not math.isfinite(dt):
             raise SceneError(f"dt must be a positive number of seconds, got {dt}")
@@ -122,21 +130,32 @@ class Scene:
         if step_guard not in STEP_GUARDS:
             raise SceneError(f"step_guard must be one of {', '.join(STEP_GUARDS)}, got {step_guard!r}")
         self.name = name
-        self.model = cloth if isinstance(cloth, Model) else Model(cloth, precision)
+        self.multilevel_cloth = cloth if isinstance(cloth, MultilevelCloth) else None
+        if multilevel is not None and self.multilevel_cloth is None:
+            raise SceneError("[multilevel] needs a cloth built as a 4-8 hierarchy (ClothBuilder.multilevel_grid)")
+        if self.multilevel_cloth is not None:
+            if self_collision:
+                raise SceneError("self_collision is not supported on a multilevel cloth yet (its triangle grid "
+                                 "would have to be rebuilt at every level switch)")
+            ml = self.multilevel_cloth
+            self.model = Model(ml.levels[ml.start_level], precision, capacity=ml.capacity)
+        else:
+            self.model = cloth if isinstance(cloth, Model) else Model(cloth, precision)
         self.state = State(self.model)
         self.dt = float(dt)
         self.fps = float(fps)
         self.max_speed, self.max_strain = float(max_speed), float(max_strain)
         self.warnings: list[str] = []
 
-        specs = [p if isinstance(p, PinSpec) else PinSpec(**p) for p in pins]
-        rest = self.model.data.positions
-        groups = [(spec.select(rest), spec.path) for spec in specs]
-        for idx, _ in groups:
-            self.model.pin(idx)
-        moving = [(idx, path) for idx, path in groups if path is not None]
-        self.pins: PinDriver | None = PinDriver(self.model, self.state, moving) if moving else None
-        self.pinned_indices = np.nonzero(self.model.pinned)[0]
+        self.pin_specs = [p if isinstance(p, PinSpec) else PinSpec(**p) for p in pins]
+        moving = [spec for spec in self.pin_specs if spec.path is not None]
+        self.pins: PinDriver | None = None
+        if moving:
+            levels = self.multilevel_cloth.levels if self.multilevel_cloth else [self.model.data]
+            capacity = max(sum(len(spec.select(d.positions)) for spec in moving) for d in levels)
+            self.pins = PinDriver(self.model, self.state, [(spec.select(self.model.data.positions), spec.path)
+                                                           for spec in moving], capacity)
+        self._apply_pins()
 
         self.wind = Wind(self.model, self.state, **wind) if wind is not None else None
         self.colliders = build_colliders(colliders, base_dir) if colliders else []
@@ -158,6 +177,16 @@ class Scene:
         self.diagnostics = Diagnostics(self.model, self.state, self.forces)
         self._normals: VertexNormals | None = None
         self.steps_taken = 0
+        self.refiner = None
+        if self.multilevel_cloth is not None:
+            from .refiner import Refiner, SettleCriterion
+
+            opts = dict(multilevel or {})
+            refine, dt_growth = opts.pop("refine", True), opts.pop("dt_growth", 1.0)
+            try:
+                self.refiner = Refiner(self, self.multilevel_cloth, SettleCriterion(**opts), refine, dt_growth)
+            except (TypeError, ValueError) as err:
+                raise SceneError(f"multilevel: {err}") from None
         self._check_step(step_guard)
         if self.pins is not None:
             self.pins.apply(0.0, None)
@@ -171,21 +200,73 @@ class Scene:
 
         return load_scene(path, **overrides).scene
 
+    def _apply_pins(self) -> None:
+        """Select the pinned particles on the current level's rest positions (specs are predicates on rest
+        coordinates, so they carry over to a refined level) and load the moving ones into the driver."""
+        rest = self.model.data.positions
+        groups = [(spec.select(rest), spec) for spec in self.pin_specs]
+        self.model.pin(np.concatenate([idx for idx, _ in groups]) if groups else [])
+        if self.pins is not None:
+            self.pins.load([idx for idx, spec in groups if spec.path is not None])
+        self.pinned_indices = np.nonzero(self.model.pinned)[0]
+
+    def _load_level(self, data: ClothData) -> None:
+        """Refill the model with another level of a multilevel cloth (same fields) and re-apply the pins."""
+        self.model.load(data)
+        self._apply_pins()
+
+    def _topology_changed(self) -> None:
+        """After a level switch (state already prolonged): integrator history, limits, moving pins."""
+        self.integrator.topology_changed()
+        if self.stretch_limit is not None:
+            self.stretch_limit.refresh()
+        if self.pins is not None:
+            self.pins.apply(self.state.t, self.dt)
+
+    def refine(self) -> None:
+        """Switch a multilevel cloth to its next level now."""
+        if self.refiner is None:
+            raise SceneError("this scene's cloth has no levels to refine (build it with ClothBuilder.multilevel_grid)")
+        self.refiner.refine()
+
+    @property
+    def level(self) -> int | None:
+        """The current level of a multilevel cloth (0-based), else None."""
+        return None if self.refiner is None else self.refiner.level
+
     @property
     def stable_dt(self) -> float | None:
-        """The linear-theory stable step [s] of this scene's integrator (None if unconditionally stable)."""
+        """The linear-theory stable step [s] of this scene's integrator on the current cloth (None if
+        unconditionally stable). The step limit shrinks by about 1/sqrt(2) per 4-8 level."""
         return stable_dt(type(self.integrator), self.model, self.forces.air_damping_value)
 
+    def _level_steps(self):
+        """(label, dt [s], stable dt [s] or None) for every level this scene may run on."""
+        if self.multilevel_cloth is None:
+            return [("", self.dt, self.stable_dt)]
+        out = []
+        for k, data in enumerate(self.multilevel_cloth.levels):
+            pinned = np.zeros(data.n_particles, dtype=bool)
+            for spec in self.pin_specs:
+                pinned[spec.select(data.positions)] = True
+            bound = stable_dt(type(self.integrator), self.model, self.forces.air_damping_value,
+                              omega=omega_max_bound(data, pinned))
+            out.append((f" on level {k + 1}", self.refiner.level_dt(k), bound))
+        return out
+
     def _check_step(self, guard: str) -> None:
-        bound = self.stable_dt
-        if bound is None or self.dt <= bound or guard == "off":
+        if guard == "off":
             return
-        msg = (f"dt = {self.dt:.3g} s exceeds the stable step {bound:.3g} s of integrator "
-               f"{self.integrator.name!r} on this cloth (linear theory, ALGORITHMS.md 1.4)")
-        if guard == "refuse":
-            raise SceneError(msg + "; lower dt or pick approx-implicit/implicit")
-        self.warnings.append(msg)
-        warnings.warn(msg, stacklevel=3)
+        for where, dt, bound in self._level_steps():
+            if bound is None or dt <= bound:
+                continue
+            msg = (f"dt = {dt:.3g} s exceeds the stable step {bound:.3g} s of integrator "
+                   f"{self.integrator.name!r} on this cloth{where} (linear theory, ALGORITHMS.md 1.4)")
+            if guard == "refuse":
+                raise SceneError(msg + "; lower dt or pick approx-implicit/implicit")
+            self.warnings.append(msg)
+            warnings.warn(msg, stacklevel=3)
+            return
 
     @property
     def substeps(self) -> int:
@@ -260,9 +341,12 @@ class Scene:
 
     def reset(self) -> None:
         """Back to t = 0: rest positions, zero velocity, integrator history cleared, pins at their start."""
+        self.steps_taken = 0
+        self.state.t = 0.0
+        if self.refiner is not None:
+            self.refiner.reset()
         self.state.reset()
         self.integrator.reset()
-        self.steps_taken = 0
         if self.pins is not None:
             self.pins.apply(0.0, None)
 
@@ -347,6 +431,10 @@ class Scene:
                     summary.timed_steps += n
                 summary.final = m
                 summary.max_strain_seen = max(summary.max_strain_seen, m.max_strain)
+                if self.refiner is not None and self.refiner.observe(m):
+                    m = self.measure()
+                    if recorder is not None:
+                        recorder.log_topology(entity, self, frame)
                 if recorder is not None and (frame % record_every == 0 or frame == frames):
                     t0 = time.perf_counter()
                     recorder.log_frame(entity, self, frame, m, steps_per_s=n / elapsed if elapsed > 0 else None)
@@ -357,6 +445,9 @@ class Scene:
         finally:
             if bar is not None:
                 bar.close()
+            if self.refiner is not None:
+                summary.levels = list(self.refiner.switches)
+                summary.n_particles, summary.n_springs = self.model.data.n_particles, self.model.data.n_springs
             if summary.steps:
                 summary.stats = {f"{k} per step": (v - stats_start.get(k, 0)) / summary.steps
                                  for k, v in self._stats().items()}

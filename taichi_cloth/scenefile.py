@@ -39,6 +39,15 @@ and a component whose table is absent is never built. The schema (units in brack
                                   # mode = "fuzzy" | "exact", repulsion = {stiffness [N], distance [m],
                                   # max_force [N]}) | "standin" (spheres and capsules for the mannequin);
                                   # all: thickness [m] = 0.003, friction = 0.3
+    [multilevel]                  # a 4-8 hierarchy over [cloth.grid] (no resolution there): coarse first,
+    levels = 5                    # refined as the drape settles (seed 000 section 2.2); 1..8
+    base_cells = [4, 4]           # cells of level 1 (alternating diagonals); each level bisects every triangle
+    start_level = 1               # the level the run starts on (levels: only the finest)
+    refine = "global"             # "global" (every triangle) or "none" (stay on start_level)
+    dt_growth = 1.0               # dt multiplier per level below the finest ([integrator] dt is the finest's)
+    [multilevel.settle]           # a level is settled when all hold: max_speed [m/s] = 0.05, energy_change = 1e-4
+                                  # (|dE| over `window` = 10 frames / (weight x cloth size)); max_time [s] = 3.0
+                                  # refines anyway
     [output]                      # dir = "out", record = true, mesh = true, record_every = 1
 """
 from __future__ import annotations
@@ -138,7 +147,7 @@ SCHEMA = Table({
     "cloth": Table({
         "material": MATERIAL_TABLE,
         "grid": Table({"size": Field("vec2", check=lambda v: None if min(v) > 0 else "must be positive"),
-                       "resolution": Field("int2", check=lambda v: None if min(v) >= 2 else "must be >= 2 each"),
+                       "resolution": Field("int2", None, check=lambda v: None if min(v) >= 2 else "must be >= 2 each"),
                        "center": Field("vec3", [0.0, 0.0, 0.0]),
                        "plane": Field("str", "xy", choices=("xy", "xz", "yz", "zy"))}),
         "mesh": Table({"path": Field("str"), "scale": Field("number", 1.0, _positive),
@@ -166,6 +175,17 @@ SCHEMA = Table({
         "repulsion": Table({"stiffness": Field("number", 1e-3, _nonneg), "distance": Field("number", 0.01, _positive),
                             "max_force": Field("number", 0.05, _positive)}),
         "thickness": Field("number", 0.003, _positive), "friction": Field("number", 0.3, _nonneg)})),
+    "multilevel": Table({
+        "levels": Field("int", 5, lambda v: None if 1 <= v <= 8 else "must lie in 1..8"),
+        "base_cells": Field("int2", [4, 4], lambda v: None if min(v) >= 1 else "must be >= 1 each"),
+        "start_level": Field("int", 1, _at_least(1)),
+        "refine": Field("str", "global", choices=("global", "none")),
+        "dt_growth": Field("number", 1.0, lambda v: None if 1 <= v <= 2 else "must lie in [1, 2]"),
+        "settle": Table({"max_speed": Field("number", 0.05, _positive),
+                         "energy_change": Field("number", 1e-4, _positive),
+                         "window": Field("int", 10, _at_least(1)),
+                         "max_time": Field("number", 3.0, _positive)}, always=True),
+    }),
     "output": Table({"dir": Field("str", "out"), "record": Field("bool", True), "mesh": Field("bool", True),
                      "record_every": Field("int", 1, _at_least(1))}, always=True),
 })
@@ -289,6 +309,17 @@ def parse_scene(source: str | Path | dict, base_dir: Path | None = None, label: 
         v.fail("[cloth]", "needs exactly one source table, [cloth.grid] or [cloth.mesh]"
                + (f" (got {' and '.join(sources)})" if sources else ""))
     _check_integrator_options(v, cfg["integrator"])
+    ml, grid = cfg.get("multilevel"), cloth.get("grid")
+    if ml is not None:
+        if grid is None:
+            v.fail("[multilevel]", "needs a [cloth.grid] (the rectangle the 4-8 hierarchy covers)")
+        if grid["resolution"] is not None:
+            v.fail("[cloth.grid] resolution", "with [multilevel] the resolution comes from base_cells and levels; "
+                                              "remove it")
+        if ml["start_level"] > ml["levels"]:
+            v.fail("[multilevel] start_level", f"must be <= levels ({ml['levels']}), got {ml['start_level']}")
+    elif grid is not None and grid["resolution"] is None:
+        v.fail("[cloth.grid]", "missing required key 'resolution'")
     for k, pin in enumerate(cfg["pins"]):
         if not pin["indices"] and not pin["near"] and pin.get("box") is None:
             v.fail(f"[[pins]] #{k + 1}", "selects nothing: give indices, near or box")
@@ -343,7 +374,12 @@ def build_scene(cfg: dict) -> Scene:
     label = cfg["_label"]
     cloth_cfg, mat = cfg["cloth"], _material(cfg)
     try:
-        if cloth_cfg.get("grid") is not None:
+        ml = cfg.get("multilevel")
+        if ml is not None:
+            g = cloth_cfg["grid"]
+            data = ClothBuilder.multilevel_grid(g["size"], ml["base_cells"], ml["levels"], mat, g["center"],
+                                                g["plane"], ml["start_level"] - 1)
+        elif cloth_cfg.get("grid") is not None:
             g = cloth_cfg["grid"]
             data = ClothBuilder.grid(g["size"], g["resolution"], mat, g["center"], g["plane"])
         else:
@@ -362,12 +398,19 @@ def build_scene(cfg: dict) -> Scene:
         return Scene(data, name=cfg["name"], integrator=name, dt=dt, integrator_options=integ,
                      gravity=cfg["gravity"], air_damping=cfg["air_damping"], pins=pins, wind=cfg.get("wind"),
                      stretch_limit=cfg.get("stretch_limit"), colliders=cfg["colliders"],
-                     self_collision=cfg["self_collision"], fps=cfg["fps"],
+                     self_collision=cfg["self_collision"], fps=cfg["fps"], multilevel=_schedule(cfg.get("multilevel")),
                      precision=cfg["precision"], step_guard=guard, base_dir=cfg["_base_dir"])
     except SceneError as exc:
         raise SceneError(f"{label}: {exc}") from None
     except ValueError as exc:  # a component refused its parameters
         raise SceneError(f"{label}: {exc}") from None
+
+
+def _schedule(ml: dict | None) -> dict | None:
+    """The Scene's `multilevel` argument from a validated [multilevel] table."""
+    if ml is None:
+        return None
+    return dict(ml["settle"], refine=ml["refine"] == "global", dt_growth=ml["dt_growth"])
 
 
 def load_scene(source: str | Path | dict, *, frames: int | None = None, integrator: str | None = None,

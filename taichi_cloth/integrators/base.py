@@ -78,6 +78,11 @@ class Integrator:
     def reset(self) -> None:
         """Forget any history (called when the state is reset or overwritten)."""
 
+    def topology_changed(self) -> None:
+        """The particles and springs were refilled (a multilevel switch) and x, v prolonged: by default
+        forget any history."""
+        self.reset()
+
     @classmethod
     def is_stable(cls, h: float, omega: float, gamma: float, beta: float) -> bool:
         return True

@@ -28,6 +28,9 @@ class HistoryIntegrator(Integrator):
     def reset(self) -> None:
         self._started = False
 
+    def topology_changed(self) -> None:
+        """Nothing to do: the history x - x_prev = h v was prolonged with v."""
+
     def _advance(self, dt: float) -> None:
         self._step(dt, self._damping_factor(dt), int(not self._started))
         self._started = True

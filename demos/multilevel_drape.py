@@ -1,0 +1,12 @@
+"""A cotton square dropped onto a ball, simulated on a coarse 4-8 level first and refined level by level
+(1 to 5) as the drape settles (demos/scenes/multilevel_drape.toml; seed 000 section 2.2).
+
+    python demos/multilevel_drape.py [--out DIR] [--frames N] [--integrator NAME] [--dt H] [--arch cpu|gpu]
+
+Writes DIR/multilevel_drape.rrd: the mesh topology changes at each level switch (an event marks it) and
+metrics/cloth/level plots the level over time. Open it with `rerun DIR/multilevel_drape.rrd`.
+"""
+from _common import run_demo
+
+if __name__ == "__main__":
+    raise SystemExit(run_demo("multilevel_drape.toml", __doc__))

@@ -1,0 +1,95 @@
+"""A cloth on a multilevel 4-8 hierarchy (seed 000 section 2.2): one ClothData per level.
+
+Every level is built from the 2D rest (pattern) coordinates, never from a deformed shape:
+- springs: structural on the triangle legs, shear on the hypotenuses (the diamond diagonals), bend across
+  every interior edge; spring constants by the isotropic rule of ClothBuilder.triangle_mesh, so the odd
+  (45-degree) and even levels are the same material (Young's modulus material.sheet_modulus, Poisson 1/3);
+- masses: area-lumped, density * sum of adjacent areas / 3, rescaled so that every level carries exactly
+  the same total mass (for a rectangle the areas already agree; a resampled outline differs slightly).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from multilevel.hierarchy import signed_areas
+
+from .builder import _PLANES, ClothBuilder, ClothData, SpringKind
+from .material import Material, material as as_material
+
+
+@dataclass
+class MultilevelCloth:
+    """hierarchy: the multilevel.Hierarchy48 (levels of uv, triangles and prolongation tables);
+    levels: ClothData per level (levels[0] coarsest); start_level: the level a scene starts on."""
+
+    hierarchy: object
+    levels: list[ClothData]
+    start_level: int = 0
+
+    def __post_init__(self):
+        if not 0 <= self.start_level < len(self.levels):
+            raise ValueError(f"start_level must lie in 0..{len(self.levels) - 1}, got {self.start_level}")
+
+    @property
+    def capacity(self) -> tuple[int, int, int]:
+        """(particles, springs, triangles): the largest of each over the levels (the finest, for 4-8)."""
+        return (max(d.n_particles for d in self.levels), max(d.n_springs for d in self.levels),
+                max(len(d.triangles) for d in self.levels))
+
+    @property
+    def n_levels(self) -> int:
+        return len(self.levels)
+
+
+def level_cloth(level, material: str | Material, center=(0.0, 0.0, 0.0), plane: str = "xy",
+                total_mass: float | None = None) -> ClothData:
+    """ClothData of one hierarchy level: uv [m] placed in `plane` around `center` [m]; masses rescaled
+    to `total_mass` [kg] when given."""
+    if plane not in _PLANES:
+        raise ValueError(f"plane must be one of {', '.join(_PLANES)}, got {plane!r}")
+    a0, a1 = _PLANES[plane]
+    positions = np.zeros((level.n_vertices, 3))
+    positions[:, a0], positions[:, a1] = level.uv[:, 0], level.uv[:, 1]
+    positions += np.asarray(center, dtype=np.float64)
+    data = ClothBuilder.triangle_mesh(positions, level.triangles, material, source="4-8 level",
+                                      stiffness_rule="isotropic")
+    if total_mass is not None:
+        data.mass *= total_mass / data.mass.sum()
+    # the hypotenuses of the regular triangles are the diamond diagonals: the "shear" springs of the level
+    regular = getattr(level, "regular", None)
+    tri = level.triangles if regular is None else level.triangles[regular]
+    hyp = np.sort(tri[:, :2], axis=1)
+    pairs = np.sort(data.springs, axis=1)
+    structural = data.kind == SpringKind.STRUCTURAL
+    is_hyp = _rows_in(pairs, hyp) & structural
+    data.kind[is_hyp] = SpringKind.SHEAR
+    return data
+
+
+def _rows_in(rows: np.ndarray, table: np.ndarray) -> np.ndarray:
+    """(len(rows),) bool: which rows of an (n,2) int array occur in `table` (m,2)."""
+    if len(table) == 0:
+        return np.zeros(len(rows), dtype=bool)
+    base = int(max(rows.max(initial=0), table.max(initial=0))) + 1
+    return np.isin(rows[:, 0] * base + rows[:, 1], table[:, 0] * base + table[:, 1])
+
+
+def multilevel_cloth(hierarchy, material: str | Material = "cotton", center=(0.0, 0.0, 0.0), plane: str = "xy",
+                     start_level: int = 0) -> MultilevelCloth:
+    """ClothData for every level of `hierarchy`, all with the finest level's total mass."""
+    mat = as_material(material)
+    finest = hierarchy.levels[-1]
+    total = mat.density * float(signed_areas(finest.uv, finest.triangles).sum())
+    levels = [level_cloth(L, mat, center, plane, total) for L in hierarchy.levels]
+    return MultilevelCloth(hierarchy, levels, start_level)
+
+
+def multilevel_grid(size=(1.0, 1.0), base_cells=(4, 4), levels: int = 5, material: str | Material = "cotton",
+                    center=(0.0, 0.0, 0.0), plane: str = "xy", start_level: int = 0) -> MultilevelCloth:
+    """A W x H [m] rectangle as a 4-8 hierarchy: base grid of (nx, ny) cells with alternating diagonals,
+    refined levels-1 times by bisection. Level L (0-based) has spacing (W/nx) / 2^(L/2)."""
+    from multilevel.hierarchy import Hierarchy48
+
+    return multilevel_cloth(Hierarchy48.rectangle(size, base_cells, levels), material, center, plane, start_level)

@@ -1,0 +1,135 @@
+"""Coarse-to-fine simulation (seed 000 section 2.2): run a coarse 4-8 level until the drape settles, then
+switch to the next level, until the finest.
+
+A switch refills the Model's fields (allocated at the finest capacity) with the next level's particles and
+springs, prolongs positions and velocities to the new vertices in one Taichi kernel (multilevel.prolong),
+re-applies the pins to the new rest coordinates and tells the integrator and constraints that the topology
+changed. Nothing is recompiled. Built only when the scene's cloth is a MultilevelCloth.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .diagnostics import Measurement
+
+
+@dataclass(frozen=True)
+class SettleCriterion:
+    """When a level counts as settled (all must hold, checked once per frame):
+
+    max_speed:     every particle slower than this [m/s];
+    energy_change: |E(now) - E(window frames ago)| below this fraction of the energy scale M |g| D
+                   (total mass [kg] x gravity [m/s^2] x the cloth's rest diameter [m]);
+    window:        frames in the energy comparison (also the fewest frames spent on a level);
+    max_time:      simulated seconds after which a level is refined even if not settled (None: never).
+    Seams closed (garments) will join this list when sewing exists.
+    """
+
+    max_speed: float = 0.05
+    energy_change: float = 1e-4
+    window: int = 10
+    max_time: float | None = 3.0
+
+    def __post_init__(self):
+        if not self.max_speed > 0:
+            raise ValueError(f"settle max_speed must be > 0 m/s, got {self.max_speed}")
+        if not self.energy_change > 0:
+            raise ValueError(f"settle energy_change must be > 0, got {self.energy_change}")
+        if int(self.window) != self.window or self.window < 1:
+            raise ValueError(f"settle window must be a whole number of frames >= 1, got {self.window}")
+        if self.max_time is not None and not self.max_time > 0:
+            raise ValueError(f"settle max_time must be > 0 s (or None), got {self.max_time}")
+
+
+@dataclass
+class LevelSwitch:
+    """One level change: the level (0-based) entered, at simulated time t [s], after `steps` steps."""
+
+    level: int
+    t: float
+    steps: int
+
+
+class Refiner:
+    """Owns the level schedule of a scene whose cloth is a MultilevelCloth.
+
+    level:    the current level (0-based; the seed's N = level + 1)
+    switches: the LevelSwitch history (the start level first)
+    settled:  whether the settle criterion held at the last observed frame
+    """
+
+    def __init__(self, scene, cloth, settle: SettleCriterion | None = None, refine: bool = True,
+                 dt_growth: float = 1.0):
+        from multilevel.prolong import Prolongation
+
+        self.scene, self.cloth = scene, cloth
+        self.settle = settle or SettleCriterion()
+        self.refine_enabled = bool(refine)
+        if not 1.0 <= dt_growth <= 2.0:
+            raise ValueError(f"multilevel dt_growth must lie in [1, 2], got {dt_growth}")
+        # the scene's dt belongs to the finest level; a coarser level may step dt_growth times larger per
+        # level (the edge length grows by sqrt(2) per level, and with it the explicit step limit)
+        self.dt_growth = float(dt_growth)
+        self.finest_dt = scene.dt
+        self.prolongation = Prolongation(cloth.capacity[0], scene.model.fp)
+        finest = cloth.levels[-1]
+        diameter = float(np.linalg.norm(np.ptp(finest.positions, axis=0)))
+        self.energy_scale = max(float(finest.mass.sum()) * float(np.linalg.norm(scene.forces.gravity_value))
+                                * diameter, 1e-12)
+        self.reset()
+
+    def reset(self) -> None:
+        """Back to the start level (the model is refilled; the caller resets the state)."""
+        self.level = self.cloth.start_level
+        self._energies: list[float] = []
+        self._level_t0 = self.scene.state.t
+        self.settled = False
+        if self.scene.model.data is not self.cloth.levels[self.level]:
+            self.scene._load_level(self.cloth.levels[self.level])
+        self._set_dt()
+        self.switches = [LevelSwitch(self.level, self.scene.state.t, self.scene.steps_taken)]
+
+    def level_dt(self, level: int) -> float:
+        """The time step [s] used on `level`."""
+        return self.finest_dt * self.dt_growth ** (self.cloth.n_levels - 1 - level)
+
+    def _set_dt(self) -> None:
+        self.scene.dt = self.level_dt(self.level)
+
+    @property
+    def at_finest(self) -> bool:
+        return self.level == self.cloth.n_levels - 1
+
+    def observe(self, m: Measurement) -> bool:
+        """Feed one frame's measurement; refine when the level has settled (or used its time budget).
+        Returns True when the level changed."""
+        self._energies.append(m.total)
+        w = self.settle.window
+        self.settled = (len(self._energies) > w and m.max_speed < self.settle.max_speed
+                        and abs(self._energies[-1] - self._energies[-1 - w]) < self.settle.energy_change * self.energy_scale)
+        if self.at_finest or not self.refine_enabled:
+            return False
+        overdue = (self.settle.max_time is not None
+                   and self.scene.state.t - self._level_t0 >= self.settle.max_time - 1e-12)
+        if self.settled or overdue:
+            self.refine()
+            return True
+        return False
+
+    def refine(self) -> None:
+        """Switch to the next level now: refill the fields, prolong x and v to the new vertices."""
+        if self.at_finest:
+            raise ValueError("the cloth is already at its finest level")
+        scene = self.scene
+        n_old = scene.model.data.n_particles
+        self.level += 1
+        scene._load_level(self.cloth.levels[self.level])
+        self.prolongation.apply(self.cloth.hierarchy.levels[self.level], scene.state.x, scene.state.v, n_old)
+        self._set_dt()
+        scene._topology_changed()
+        self._energies = []
+        self._level_t0 = scene.state.t
+        self.settled = False
+        self.switches.append(LevelSwitch(self.level, scene.state.t, scene.steps_taken))
