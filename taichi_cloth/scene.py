@@ -173,6 +173,13 @@ class Scene:
         self.forces = ForceModel(self.model, self.state, gravity, air_damping, sources)
         self.integrator = integrator_class(integrator)(self.model, self.state, self.forces,
                                                        **(integrator_options or {}))
+        if getattr(self.integrator, "needs_levels", False):
+            ml = self.multilevel_cloth
+            if ml is None:
+                raise SceneError(f"integrator {integrator!r} with multigrid_cycles needs a multilevel cloth "
+                                 "([multilevel] in a scene file, ClothBuilder.multilevel_grid in Python)")
+            self.integrator.attach_levels(ml.hierarchy.levels, ml.levels, [self._pinned_on(d) for d in ml.levels],
+                                          ml.start_level)
         self.stretch_limit = StretchLimit(self.model, self.state, **stretch_limit) if stretch_limit else None
         self.diagnostics = Diagnostics(self.model, self.state, self.forces)
         self._normals: VertexNormals | None = None
@@ -210,6 +217,13 @@ class Scene:
             self.pins.load([idx for idx, spec in groups if spec.path is not None])
         self.pinned_indices = np.nonzero(self.model.pinned)[0]
 
+    def _pinned_on(self, data: ClothData) -> np.ndarray:
+        """(P,) bool: the particles of `data` (a level of this scene's cloth) that the pins select."""
+        pinned = np.zeros(data.n_particles, dtype=bool)
+        for spec in self.pin_specs:
+            pinned[spec.select(data.positions)] = True
+        return pinned
+
     def _load_level(self, data: ClothData) -> None:
         """Refill the model with another level of a multilevel cloth (same fields) and re-apply the pins."""
         self.model.load(data)
@@ -217,7 +231,7 @@ class Scene:
 
     def _topology_changed(self) -> None:
         """After a level switch (state already prolonged): integrator history, limits, moving pins."""
-        self.integrator.topology_changed()
+        self.integrator.topology_changed(self.level)
         if self.stretch_limit is not None:
             self.stretch_limit.refresh()
         if self.pins is not None:
@@ -246,11 +260,8 @@ class Scene:
             return [("", self.dt, self.stable_dt)]
         out = []
         for k, data in enumerate(self.multilevel_cloth.levels):
-            pinned = np.zeros(data.n_particles, dtype=bool)
-            for spec in self.pin_specs:
-                pinned[spec.select(data.positions)] = True
             bound = stable_dt(type(self.integrator), self.model, self.forces.air_damping_value,
-                              omega=omega_max_bound(data, pinned))
+                              omega=omega_max_bound(data, self._pinned_on(data)))
             out.append((f" on level {k + 1}", self.refiner.level_dt(k), bound))
         return out
 

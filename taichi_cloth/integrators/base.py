@@ -78,9 +78,9 @@ class Integrator:
     def reset(self) -> None:
         """Forget any history (called when the state is reset or overwritten)."""
 
-    def topology_changed(self) -> None:
-        """The particles and springs were refilled (a multilevel switch) and x, v prolonged: by default
-        forget any history."""
+    def topology_changed(self, level: int | None = None) -> None:
+        """The particles and springs were refilled (a multilevel switch to `level`, 0-based) and x, v
+        prolonged: by default forget any history."""
         self.reset()
 
     @classmethod

@@ -28,7 +28,7 @@ class HistoryIntegrator(Integrator):
     def reset(self) -> None:
         self._started = False
 
-    def topology_changed(self) -> None:
+    def topology_changed(self, level: int | None = None) -> None:
         """Nothing to do: the history x - x_prev = h v was prolonged with v."""
 
     def _advance(self, dt: float) -> None:
