@@ -210,3 +210,81 @@ def signed_areas(uv: np.ndarray, triangles: np.ndarray) -> np.ndarray:
 def _tolerance(uv: np.ndarray) -> float:
     span = float(np.ptp(uv, axis=0).max()) if len(uv) else 1.0
     return 1e-9 * max(span, 1e-12)
+
+
+def refine_local(uv: np.ndarray, triangles: np.ndarray, marked: np.ndarray, depth: np.ndarray | None = None,
+                 max_depth: int | None = None) -> tuple[Level, np.ndarray]:
+    """Bisect the `marked` triangles ((t,) bool) across their hypotenuses, keeping the mesh conforming:
+    a triangle whose hypotenuse neighbour does not share that hypotenuse first has the neighbour split (the
+    4-8 forced split, recursively), then both halves of the diamond are split together.
+
+    depth: (t,) int, how many bisections made each triangle (default 0); a triangle at max_depth is not
+    split (marks on it are dropped), so a locally refined mesh never outgrows the global level max_depth.
+    Returns the refined Level (vertices nested: old ones first, midpoints appended; prolongation tables
+    from the input) and the new triangles' depths."""
+    tris = [tuple(int(v) for v in t) for t in np.asarray(triangles, np.int64)]
+    depths = list(np.zeros(len(tris), np.int64) if depth is None else np.asarray(depth, np.int64))
+    alive = [True] * len(tris)
+    by_edge: dict[tuple[int, int], list[int]] = {}
+    for k, (a, b, c) in enumerate(tris):
+        for e in ((a, b), (b, c), (c, a)):
+            by_edge.setdefault((min(e), max(e)), []).append(k)
+    n0 = len(uv)
+    points = [tuple(p) for p in np.asarray(uv, np.float64)]
+    mids: dict[tuple[int, int], int] = {}
+    parents: list[tuple[int, int]] = []
+
+    def neighbour(k: int, edge: tuple[int, int]) -> int:
+        for j in by_edge[edge]:
+            if j != k and alive[j]:
+                return j
+        return -1
+
+    def bisect_one(k: int, m: int) -> None:
+        a, b, c = tris[k]
+        alive[k] = False
+        for e in ((a, b), (b, c), (c, a)):
+            by_edge[(min(e), max(e))].remove(k)
+        for child in ((c, a, m), (b, c, m)):
+            tris.append(child)
+            depths.append(depths[k] + 1)
+            alive.append(True)
+            j = len(tris) - 1
+            x, y, z = child
+            for e in ((x, y), (y, z), (z, x)):
+                by_edge.setdefault((min(e), max(e)), []).append(j)
+
+    def split(k: int) -> None:
+        a, b, _ = tris[k]
+        edge = (min(a, b), max(a, b))
+        n = neighbour(k, edge)
+        if n >= 0 and (min(tris[n][:2]), max(tris[n][:2])) != edge:
+            split(n)  # the neighbour is coarser: split it first; its child on this edge has it as hypotenuse
+            n = neighbour(k, edge)
+        m = mids.get(edge)
+        if m is None:
+            m = n0 + len(parents)
+            mids[edge] = m
+            parents.append(edge)
+            pa, pb = points[a], points[b]
+            points.append((0.5 * (pa[0] + pb[0]), 0.5 * (pa[1] + pb[1])))
+        bisect_one(k, m)
+        if n >= 0:
+            bisect_one(n, m)
+
+    limit = np.inf if max_depth is None else max_depth
+    for k in np.nonzero(np.asarray(marked, bool))[0]:
+        if alive[k] and depths[k] < limit:
+            split(int(k))
+    keep = np.nonzero(alive)[0]
+    n = n0 + len(parents)
+    par, w = identity_tables(n)
+    diamonds = np.full((n, 4), -1, np.int64)
+    if parents:
+        pe = np.asarray(parents, np.int64)
+        par[n0:, 0], par[n0:, 1] = pe[:, 0], pe[:, 1]
+        w[n0:, 0] = w[n0:, 1] = 0.5
+        diamonds[n0:, :2] = pe
+    level = Level(np.asarray(points, np.float64), np.asarray([tris[k] for k in keep], np.int64).reshape(-1, 3),
+                  par, w, diamonds)
+    return level, np.asarray(depths, np.int64)[keep]

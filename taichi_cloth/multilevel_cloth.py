@@ -22,11 +22,19 @@ from .material import Material, material as as_material
 @dataclass
 class MultilevelCloth:
     """hierarchy: the multilevel.Hierarchy48 (levels of uv, triangles and prolongation tables);
-    levels: ClothData per level (levels[0] coarsest); start_level: the level a scene starts on."""
+    levels: ClothData per level (levels[0] coarsest); start_level: the level a scene starts on;
+    material, center, plane: how the levels were built (a local refinement builds its meshes the same way)."""
 
     hierarchy: object
     levels: list[ClothData]
     start_level: int = 0
+    material: Material | None = None
+    center: tuple = (0.0, 0.0, 0.0)
+    plane: str = "xy"
+
+    def build(self, level) -> ClothData:
+        """ClothData of another mesh of this cloth (a locally refined level), with the same total mass."""
+        return level_cloth(level, self.material, self.center, self.plane, float(self.levels[-1].mass.sum()))
 
     def __post_init__(self):
         if not 0 <= self.start_level < len(self.levels):
@@ -83,7 +91,7 @@ def multilevel_cloth(hierarchy, material: str | Material = "cotton", center=(0.0
     finest = hierarchy.levels[-1]
     total = mat.density * float(signed_areas(finest.uv, finest.triangles).sum())
     levels = [level_cloth(L, mat, center, plane, total) for L in hierarchy.levels]
-    return MultilevelCloth(hierarchy, levels, start_level)
+    return MultilevelCloth(hierarchy, levels, start_level, mat, tuple(center), plane)
 
 
 def multilevel_grid(size=(1.0, 1.0), base_cells=(4, 4), levels: int = 5, material: str | Material = "cotton",

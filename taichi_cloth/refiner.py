@@ -5,6 +5,11 @@ A switch refills the Model's fields (allocated at the finest capacity) with the 
 springs, prolongs positions and velocities to the new vertices in one Taichi kernel (multilevel.prolong),
 re-applies the pins to the new rest coordinates and tells the integrator and constraints that the topology
 changed. Nothing is recompiled. Built only when the scene's cloth is a MultilevelCloth.
+
+Refinement is global (every triangle bisected: the next level of the hierarchy) or local: only the
+triangles whose dihedral angle across the hypotenuse exceeds `angle` degrees, or that touch a collider,
+are bisected (with the 4-8 forced splits that keep the mesh conforming, multilevel.hierarchy.refine_local),
+never deeper than the hierarchy's finest level, so the fields' capacity still holds.
 """
 from __future__ import annotations
 
@@ -60,13 +65,23 @@ class Refiner:
     settled:  whether the settle criterion held at the last observed frame
     """
 
-    def __init__(self, scene, cloth, settle: SettleCriterion | None = None, refine: bool = True,
-                 dt_growth: float = 1.0):
+    def __init__(self, scene, cloth, settle: SettleCriterion | None = None, refine: bool | str = True,
+                 dt_growth: float = 1.0, angle: float = 20.0):
         from multilevel.prolong import Prolongation
 
         self.scene, self.cloth = scene, cloth
         self.settle = settle or SettleCriterion()
-        self.refine_enabled = bool(refine)
+        mode = {True: "global", False: "none"}.get(refine, refine)
+        if mode not in ("global", "local", "none"):
+            raise ValueError(f"multilevel refine must be 'global', 'local' or 'none', got {refine!r}")
+        self.mode = mode
+        if mode == "local" and getattr(cloth.hierarchy.levels[0], "regular", None) is not None:
+            raise ValueError("local refinement needs a 4-8 hierarchy of a rectangle (an outline's boundary band "
+                             "is re-triangulated per level, not bisected)")
+        self.refine_enabled = mode != "none"
+        if not 0 < angle < 180:
+            raise ValueError(f"multilevel angle must lie in (0, 180) degrees, got {angle}")
+        self.angle = float(angle)
         if not 1.0 <= dt_growth <= 2.0:
             raise ValueError(f"multilevel dt_growth must lie in [1, 2], got {dt_growth}")
         # the scene's dt belongs to the finest level; a coarser level may step dt_growth times larger per
@@ -83,6 +98,9 @@ class Refiner:
     def reset(self) -> None:
         """Back to the start level (the model is refilled; the caller resets the state)."""
         self.level = self.cloth.start_level
+        self.mesh = self.cloth.hierarchy.levels[self.level]  # the current Level (uv, triangles)
+        self._depth = np.full(self.mesh.n_triangles, self.level, np.int64)
+        self._exhausted = False
         self._energies: list[float] = []
         self._level_t0 = self.scene.state.t
         self.settled = False
@@ -100,7 +118,8 @@ class Refiner:
 
     @property
     def at_finest(self) -> bool:
-        return self.level == self.cloth.n_levels - 1
+        """No further refinement: the finest level (global), or nothing left to refine (local)."""
+        return self.level == self.cloth.n_levels - 1 or self._exhausted
 
     def observe(self, m: Measurement) -> bool:
         """Feed one frame's measurement; refine when the level has settled (or used its time budget).
@@ -124,12 +143,49 @@ class Refiner:
             raise ValueError("the cloth is already at its finest level")
         scene = self.scene
         n_old = scene.model.data.n_particles
+        if self.mode == "local":
+            from multilevel.hierarchy import refine_local
+
+            mesh, self._depth = refine_local(self.mesh.uv, self.mesh.triangles, self.marked(), self._depth,
+                                             self.cloth.n_levels - 1)
+            if mesh.n_vertices == n_old:
+                self._exhausted = True  # nothing called for refinement: this is the finest the drape needs
+                return
+            data = self.cloth.build(mesh)
+        else:
+            mesh = self.cloth.hierarchy.levels[self.level + 1]
+            data = self.cloth.levels[self.level + 1]
         self.level += 1
-        scene._load_level(self.cloth.levels[self.level])
-        self.prolongation.apply(self.cloth.hierarchy.levels[self.level], scene.state.x, scene.state.v, n_old)
+        self.mesh = mesh
+        scene._load_level(data)
+        self.prolongation.apply(mesh, scene.state.x, scene.state.v, n_old)
         self._set_dt()
         scene._topology_changed()
         self._energies = []
         self._level_t0 = scene.state.t
         self.settled = False
         self.switches.append(LevelSwitch(self.level, scene.state.t, scene.steps_taken))
+
+    def marked(self) -> np.ndarray:
+        """(t,) bool: the current triangles that call for refinement: a dihedral angle across the hypotenuse
+        above `angle` degrees (curvature), or a vertex in contact with a collider in the last step."""
+        tri = self.mesh.triangles
+        x = self.scene.positions()
+        n = np.cross(x[tri[:, 1]] - x[tri[:, 0]], x[tri[:, 2]] - x[tri[:, 0]])
+        n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
+        key = np.sort(tri[:, :2], axis=1)
+        _, inverse, count = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+        inverse = inverse.reshape(-1)
+        order = np.argsort(inverse, kind="stable")
+        marked = np.zeros(len(tri), dtype=bool)
+        # triangles sharing a hypotenuse come in pairs (a diamond); boundary hypotenuses have no partner
+        first = np.searchsorted(inverse[order], np.arange(len(count)))
+        two = count == 2
+        a, b = order[first[two]], order[first[two] + 1]
+        bent = np.degrees(np.arccos(np.clip((n[a] * n[b]).sum(axis=1), -1.0, 1.0))) > self.angle
+        marked[a[bent]] = marked[b[bent]] = True
+        contacts = self.scene.contacts
+        if contacts is not None:
+            touching = np.linalg.norm(contacts.normal.to_numpy()[: len(x)], axis=1) > 0
+            marked |= touching[tri].any(axis=1)
+        return marked

@@ -111,8 +111,10 @@ class Scene:
     self_collision:     False, True, or SelfCollision keyword arguments (thickness, friction): the cloth
                         against its own triangles, resolved before the colliders
     multilevel:         for a MultilevelCloth: SettleCriterion keyword arguments (max_speed, energy_change,
-                        window, max_time), refine (False: stay on the start level) and dt_growth (time step
-                        multiplier per level below the finest; dt is the finest level's step; default 1)
+                        window, max_time), refine ("global" = True, "local", or "none" = False: stay on the
+                        start level), angle (local refinement: dihedral angle [deg] that calls for it, default
+                        20) and dt_growth (time step multiplier per level below the finest; dt is the finest
+                        level's step; default 1)
     fps:                frames per simulated second for run() and recording; substeps = round(1/(fps dt))
     step_guard:         what to do when an explicit integrator's dt exceeds its stable bound: warn/refuse/off
     max_speed [m/s], max_strain [-]: beyond these (or at any NaN) a run is declared blown up
@@ -175,6 +177,8 @@ class Scene:
                                                        **(integrator_options or {}))
         if getattr(self.integrator, "needs_levels", False):
             ml = self.multilevel_cloth
+            if ml is not None and (multilevel or {}).get("refine") == "local":
+                raise SceneError("multigrid_cycles needs the nested levels of global refinement, not refine = local")
             if ml is None:
                 raise SceneError(f"integrator {integrator!r} with multigrid_cycles needs a multilevel cloth "
                                  "([multilevel] in a scene file, ClothBuilder.multilevel_grid in Python)")
@@ -190,8 +194,9 @@ class Scene:
 
             opts = dict(multilevel or {})
             refine, dt_growth = opts.pop("refine", True), opts.pop("dt_growth", 1.0)
+            angle = opts.pop("angle", 20.0)
             try:
-                self.refiner = Refiner(self, self.multilevel_cloth, SettleCriterion(**opts), refine, dt_growth)
+                self.refiner = Refiner(self, self.multilevel_cloth, SettleCriterion(**opts), refine, dt_growth, angle)
             except (TypeError, ValueError) as err:
                 raise SceneError(f"multilevel: {err}") from None
         self._check_step(step_guard)

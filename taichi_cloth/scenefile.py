@@ -43,7 +43,8 @@ and a component whose table is absent is never built. The schema (units in brack
     levels = 5                    # refined as the drape settles (seed 000 section 2.2); 1..8
     base_cells = [4, 4]           # cells of level 1 (alternating diagonals); each level bisects every triangle
     start_level = 1               # the level the run starts on (levels: only the finest)
-    refine = "global"             # "global" (every triangle) or "none" (stay on start_level)
+    refine = "global"             # "global" (every triangle), "local" (where the dihedral angle across a
+                                  # hypotenuse exceeds `angle` = 20 [deg] or a collider touches), "none"
     dt_growth = 1.0               # dt multiplier per level below the finest ([integrator] dt is the finest's)
     [multilevel.settle]           # a level is settled when all hold: max_speed [m/s] = 0.05, energy_change = 1e-4
                                   # (|dE| over `window` = 10 frames / (weight x cloth size)); max_time [s] = 3.0
@@ -179,7 +180,8 @@ SCHEMA = Table({
         "levels": Field("int", 5, lambda v: None if 1 <= v <= 8 else "must lie in 1..8"),
         "base_cells": Field("int2", [4, 4], lambda v: None if min(v) >= 1 else "must be >= 1 each"),
         "start_level": Field("int", 1, _at_least(1)),
-        "refine": Field("str", "global", choices=("global", "none")),
+        "refine": Field("str", "global", choices=("global", "local", "none")),
+        "angle": Field("number", 20.0, lambda v: None if 0 < v < 180 else "must lie in (0, 180) degrees"),
         "dt_growth": Field("number", 1.0, lambda v: None if 1 <= v <= 2 else "must lie in [1, 2]"),
         "settle": Table({"max_speed": Field("number", 0.05, _positive),
                          "energy_change": Field("number", 1e-4, _positive),
@@ -410,7 +412,7 @@ def _schedule(ml: dict | None) -> dict | None:
     """The Scene's `multilevel` argument from a validated [multilevel] table."""
     if ml is None:
         return None
-    return dict(ml["settle"], refine=ml["refine"] == "global", dt_growth=ml["dt_growth"])
+    return dict(ml["settle"], refine=ml["refine"], dt_growth=ml["dt_growth"], angle=ml["angle"])
 
 
 def load_scene(source: str | Path | dict, *, frames: int | None = None, integrator: str | None = None,

@@ -226,7 +226,7 @@ max_time = 0.2
     assert len(got["/metrics/cloth/level"][1]) == 41
     assert len(got["/cloth/events"][1]) == 2  # one event per switch
     for bad, message in ((text.replace("levels = 3", "levels = 0"), "levels"),
-                         (text.replace("base_cells = [2, 2]", "base_cells = [2, 2]\nrefine = \"local\""), "refine"),
+                         (text.replace("base_cells = [2, 2]", "base_cells = [2, 2]\nrefine = \"adaptive\""), "refine"),
                          (text.replace("plane = \"xz\"", "plane = \"xz\"\nresolution = [5, 5]"), "resolution"),
                          (text.replace("max_time = 0.2", "max_time = -1"), "max_time"),
                          (text.replace("[multilevel]\n", "[multilevel]\nstart_level = 4\n"), "start_level"),
@@ -291,3 +291,23 @@ def test_an_outline_hierarchy_drapes_through_its_levels_with_its_mass():
         L = cloth.hierarchy.levels[sc.level]
         assert np.abs(sc.positions() - L.prolong(x)).max() < 1e-13
         assert sc.check().max_strain < 0.05
+
+
+def test_local_refinement_follows_the_drape_and_stays_conforming():
+    """refine = "local": only triangles bent by more than `angle` across their hypotenuse, or touching the
+    ball, are bisected (with the 4-8 forced splits). The mesh stays conforming, keeps its mass, ends with
+    fewer particles than the global finest level, and its finest triangles lie where the cloth meets the ball."""
+    cloth = multilevel_grid((1.0, 1.0), (4, 4), 5, "cotton", center=(0, 0.6, 0), plane="xz")
+    ball = np.array([0.0, 0.3, 0.0])
+    sc = tc.Scene(cloth, integrator="implicit", dt=1 / 120, colliders=[dict(type="sphere", center=ball, radius=0.25)],
+                  multilevel=dict(refine="local", max_time=0.4, angle=15.0))
+    sc.run(120, progress=False)
+    r = sc.refiner
+    assert [s.level for s in r.switches] == [0, 1, 2, 3, 4]
+    mesh = r.mesh
+    assert len(hanging_vertices(mesh.uv, mesh.triangles)) == 0 and edge_use(mesh.triangles)[1].max() == 2
+    assert abs(signed_areas(mesh.uv, mesh.triangles).sum() - 1.0) < 1e-12
+    assert cloth.levels[1].n_particles < sc.model.data.n_particles < cloth.levels[-1].n_particles
+    assert sc.model.data.mass.sum() == pytest.approx(0.15, rel=1e-13)
+    gap = np.abs(np.linalg.norm(sc.positions() - ball, axis=1) - 0.25)[mesh.triangles].mean(axis=1)
+    assert gap[r._depth == r._depth.max()].mean() < 0.5 * gap[r._depth == r._depth.min()].mean()
