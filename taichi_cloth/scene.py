@@ -363,6 +363,8 @@ class Scene:
             self.refiner.reset()
         self.state.reset()
         self.integrator.reset()
+        if self.refiner is not None:
+            self.integrator.topology_changed(self.level)
         if self.pins is not None:
             self.pins.apply(0.0, None)
 

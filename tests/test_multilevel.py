@@ -264,6 +264,9 @@ def test_multigrid_option_lets_a_stiff_sheet_fall_like_backward_euler_and_surviv
         sc.step(20)
     assert cc.total == 0, cc.compiled
     assert sc.integrator.multigrid.active == 2 and sc.check().max_strain < 0.05
+    sc.reset()  # back to the start level: the solver follows
+    assert sc.level == 0 and sc.integrator.multigrid.active == 0
+    sc.step(5)
     with pytest.raises(SceneError, match="multilevel"):
         tc.Scene(tc.ClothBuilder.grid((0.5, 0.5), (6, 6)), integrator="approx-implicit",
                  integrator_options={"multigrid_cycles": 2})
