@@ -59,13 +59,14 @@ def test_field_blocks_of_dead_owners_are_recycled():
     class Owner:
         """Anything whose lifetime a block follows."""
 
-    for _ in range(700):
+    for k in range(700):
         owner = Owner()
         blk = fields.FieldBlock()
         f = blk.scalar(ti.f32, 8)
         blk.finalize(owner)
-        f.from_numpy(np.arange(8, dtype=np.float32))
-        assert f.to_numpy()[7] == 7.0
+        if k % 25 == 0 or k == 699:  # each new field compiles its own copy kernels (~0.1 s): use a sample
+            f.from_numpy(np.arange(8, dtype=np.float32))
+            assert f.to_numpy()[7] == 7.0
         del owner, blk, f
         gc.collect()
     assert fields._live <= fields.LIVE_TREE_LIMIT + 2
