@@ -120,11 +120,12 @@ class Scene:
     max_speed [m/s], max_strain [-]: beyond these (or at any NaN) a run is declared blown up
     """
 
-    def __init__(self, cloth: ClothData | Model, *, name: str = "cloth", integrator: str = "approx-implicit",
+    def __init__(self, cloth: ClothData | Model | MultilevelCloth, *, name: str = "cloth", integrator: str = "approx-implicit",
                  dt: float = 1.0 / 240.0, integrator_options: dict | None = None, gravity=(0.0, -9.81, 0.0),
                  air_damping: float = 0.1, pins=(), wind: dict | None = None, stretch_limit: dict | None = None,
-                 colliders=(), self_collision=False, multilevel: dict | None = None, fps: float = 60.0, precision: str = "f32", step_guard: str = "warn",
-                 max_speed: float = 200.0, max_strain: float = 10.0, base_dir=None):
+                 colliders=(), self_collision=False, multilevel: dict | None = None, fps: float = 60.0,
+                 precision: str = "f32", step_guard: str = "warn", max_speed: float = 200.0, max_strain: float = 10.0,
+                 base_dir=None):
         if not dt > 0 or not math.isfinite(dt):
             raise SceneError(f"dt must be a positive number of seconds, got {dt}")
         if not fps > 0:
