@@ -9,11 +9,15 @@ class SceneError(TaichiClothError, ValueError):
     """A scene (file or dict) is malformed: the message names the file, the table and the key."""
 
 
+class PatternError(TaichiClothError, ValueError):
+    """A pattern piece, garment file or DXF file is malformed: the message names the piece, seam or file."""
+
+
 # A mesh is unusable (missing, empty, non-manifold, NaN vertices, degenerate faces): the message names the file.
 # Defined by the collision package (which loads bodies and cloth meshes and must not import taichi_cloth).
 from collision.errors import MeshError  # noqa: E402
 
-__all__ = ["BlowUpError", "MeshError", "SceneError", "TaichiClothError"]
+__all__ = ["BlowUpError", "MeshError", "PatternError", "SceneError", "TaichiClothError"]
 
 
 class BlowUpError(TaichiClothError, RuntimeError):
