@@ -1,0 +1,483 @@
+"""DXF import and export of 2D pattern pieces (seed 003), with ezdxf.
+
+Reading (`read_dxf`):
+  * Pieces come from model-space LAYERS (the entities on one layer; piece name = layer name) and from BLOCKS
+    that are INSERTed (AAMA-style pattern files; piece name = block name, the INSERT's translation, rotation
+    and scale applied through ezdxf's virtual_entities()). Inside a block, when some entity sits on layer "1"
+    (the AAMA boundary layer) only layer-"1" entities form the outline, so grain lines and internal lines on
+    other layers do not break it.
+  * Entities: LINE -> "line"; ARC -> "arc" (bulge and direction from the sweep; a 360-degree ARC is a circle);
+    CIRCLE -> a closed loop of two half-circle arcs; SPLINE -> "bspline" (control points, degree, knots and
+    weights kept verbatim; a fit-point-only SPLINE gets control points from ezdxf's construction tool);
+    ELLIPSE -> rational "bspline"; LWPOLYLINE / 2D or 3D POLYLINE:
+      - closed (flag, or last vertex == first) -> one "line"/"arc" segment per edge, every vertex a corner;
+      - open with bulges -> one "line"/"arc" segment per edge;
+      - open without bulges -> ONE "polyline" segment (interior vertices are not corners), so that polyline
+        segments survive a write/read round trip.
+    TEXT / MTEXT whose insertion (or alignment) point lies on a corner (within tolerance) names that corner.
+    Everything else (POINT, HATCH, DIMENSION, ...) is ignored.
+  * Open entities on a layer are chained end to end (endpoints matched within tolerance, reversed as needed)
+    into closed loops; an entity whose ends meet (or a closed entity) is a loop by itself. A layer with
+    several loops gives pieces "layer", "layer.1", "layer.2", ... in file order; an open end that matches
+    nothing is a PatternError naming the file, the layer and the gap (in the file's units).
+  * Units: the `units` argument if given, else $INSUNITS (1 in, 4 mm, 5 cm, 6 m); unitless (0) is read as mm
+    (the usual pattern-CAD export unit). Pieces are returned in metres.
+  * Tolerance [m]: default 1e-5 * the bounding-box diagonal of the layer's (or block's) entities. Chained
+    ends are then snapped together exactly (the movable end of a line/polyline/arc/clamped spline moves).
+
+Writing (`write_dxf`): R2010, $INSUNITS set, each piece on its own layer named after the piece, each segment
+one entity in loop order (line -> LINE, polyline -> open LWPOLYLINE, arc -> open 2-vertex LWPOLYLINE with a
+bulge, bspline -> SPLINE with control points, degree, explicit knots and weights), each corner name a TEXT at
+the corner. A round trip gives back equal pieces (a zero-bulge "arc" reads back as a "polyline").
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from taichi_cloth.errors import PatternError
+from taichi_cloth.garment.pattern import UNITS, PatternPiece, Segment, open_uniform_knots, unit_scale
+
+__all__ = ["read_dxf", "write_dxf"]
+
+_INSUNITS_TO_UNITS = {0: "mm", 1: "in", 4: "mm", 5: "cm", 6: "m"}
+_UNITS_TO_INSUNITS = {"in": 1, "mm": 4, "cm": 5, "m": 6}
+_AAMA_BOUNDARY_LAYER = "1"
+_VTX_SPLINE_FRAME = 16  # POLYLINE vertex flag: spline frame control point, not part of the drawn curve
+
+
+@dataclass
+class _Chunk:
+    """Consecutive segments [m] from one entity, in the entity's direction; closed = a loop by itself."""
+
+    segments: list
+    source: str
+    closed: bool = False
+
+    @property
+    def start(self) -> np.ndarray:
+        return self.segments[0].start
+
+    @property
+    def end(self) -> np.ndarray:
+        return self.segments[-1].end
+
+    def reversed(self) -> "_Chunk":
+        return _Chunk([s.reversed() for s in reversed(self.segments)], self.source, self.closed)
+
+
+@dataclass
+class _Source:
+    """The entities of one would-be piece: a model-space layer or an inserted block."""
+
+    kind: str  # "layer" | "block"
+    name: str
+    entities: list
+
+
+# ----------------------------------------------------------------------------------------------------------
+# reading
+# ----------------------------------------------------------------------------------------------------------
+
+def read_dxf(path, units: str | None = None, tolerance: float | None = None) -> list:
+    """Pattern pieces (list[PatternPiece], metres) from the DXF file at `path` (see the module docstring).
+
+    units: "m" | "cm" | "mm" | "in" to override the file's $INSUNITS; tolerance [m]: endpoint matching and
+    text-to-corner distance (default 1e-5 * the size of each layer or block).
+    """
+    path = Path(path)
+    doc = _open(path)
+    scale, unit_name = _file_units(doc, path, units)
+    if tolerance is not None and not (tolerance > 0 and math.isfinite(tolerance)):
+        raise PatternError(f"{path}: tolerance must be > 0, got {tolerance!r}")
+    pieces: list[PatternPiece] = []
+    used: set[str] = set()
+    for src in _sources(doc):
+        for name, loop, names, tol in _source_loops(src, path, scale, unit_name, tolerance):
+            piece = PatternPiece(_unique_name(name, used), loop, names)
+            try:
+                piece.validate(tolerance=tol)
+            except PatternError as exc:
+                raise PatternError(f"{path}: {src.kind} '{src.name}': {exc}") from None
+            pieces.append(piece)
+    if not pieces:
+        raise PatternError(f"{path}: no pattern pieces found (no closed outline on any layer or in any "
+                           f"inserted block)")
+    return pieces
+
+
+def _open(path: Path):
+    import ezdxf
+
+    if not path.is_file():
+        raise PatternError(f"DXF file {path} not found")
+    try:
+        return ezdxf.readfile(path)
+    except Exception as exc:  # ezdxf raises assorted errors (structure, decoding, value) on non-DXF input
+        raise PatternError(f"{path} is not a readable DXF file ({type(exc).__name__}: {exc})") from None
+
+
+def _file_units(doc, path: Path, units: str | None) -> tuple[float, str]:
+    """(metres per file unit, unit name)."""
+    if units is not None:
+        return unit_scale(units), units
+    code = doc.header.get("$INSUNITS", 0)
+    if code not in _INSUNITS_TO_UNITS:
+        raise PatternError(f"{path}: unsupported $INSUNITS = {code}; pass units= one of {', '.join(UNITS)}")
+    name = _INSUNITS_TO_UNITS[code]
+    return UNITS[name], name
+
+
+def _sources(doc) -> list:
+    """Model-space layers (entities other than INSERT, in file order) and one source per INSERT."""
+    layers: dict[str, _Source] = {}
+    blocks: list[_Source] = []
+    for e in doc.modelspace():
+        if e.dxftype() == "INSERT":
+            ents = list(_flatten(e))
+            if any(x.dxf.layer == _AAMA_BOUNDARY_LAYER and not _is_text(x) for x in ents):
+                ents = [x for x in ents if _is_text(x) or x.dxf.layer == _AAMA_BOUNDARY_LAYER]
+            blocks.append(_Source("block", e.dxf.name, ents))
+        else:
+            layers.setdefault(e.dxf.layer, _Source("layer", e.dxf.layer, [])).entities.append(e)
+    return list(layers.values()) + blocks
+
+
+def _flatten(insert, depth: int = 0):
+    """Virtual (transformed) entities of an INSERT, nested INSERTs expanded."""
+    for e in insert.virtual_entities():
+        if e.dxftype() == "INSERT" and depth < 16:
+            yield from _flatten(e, depth + 1)
+        else:
+            yield e
+
+
+def _is_text(e) -> bool:
+    return e.dxftype() in ("TEXT", "MTEXT")
+
+
+def _unique_name(name: str, used: set) -> str:
+    out, k = name, 0
+    while out in used:
+        k += 1
+        out = f"{name}.{k}"
+    used.add(out)
+    return out
+
+
+def _source_loops(src: _Source, path: Path, scale: float, unit_name: str, tolerance: float | None):
+    """(piece name, segments, corner names, tolerance [m]) of each loop of one source."""
+    shapes = [e for e in src.entities if not _is_text(e)]
+    if not shapes:
+        return []
+    tol = tolerance if tolerance is not None else _default_tol(shapes, scale)
+    where = f"{path}: {src.kind} '{src.name}'"
+    chunks = []
+    for e in shapes:
+        chunks.extend(_entity_chunks(e, scale, tol, where))
+    if not chunks:
+        return []
+    texts = [t for e in src.entities if _is_text(e) for t in [_text(e, scale)] if t is not None]
+    loops = _chain(chunks, tol, where, scale, unit_name)
+    out = []
+    for k, loop in enumerate(loops):
+        loop = _snap(loop)
+        name = src.name if k == 0 else f"{src.name}.{k}"
+        out.append((name, loop, _corner_names(loop, texts, tol), tol))
+    return out
+
+
+def _default_tol(entities, scale: float) -> float:
+    from ezdxf import bbox
+
+    box = bbox.extents(entities, fast=True)
+    diag = float(box.size.magnitude) if box.has_data else 0.0
+    return max(1e-5 * diag * scale, 1e-9)
+
+
+# -- entities -> chunks ----------------------------------------------------------------------------------
+
+def _describe(e) -> str:
+    handle = e.dxf.get("handle", None)
+    return f"{e.dxftype()} {handle}" if handle else e.dxftype()
+
+
+def _entity_chunks(e, scale: float, tol: float, where: str) -> list:
+    kind = e.dxftype()
+    try:
+        if kind == "LINE":
+            p = np.array([_xy(e.dxf.start), _xy(e.dxf.end)]) * scale
+            return [] if np.array_equal(p[0], p[1]) else [_Chunk([Segment("line", p)], _describe(e))]
+        if kind == "LWPOLYLINE":
+            ocs, elev = e.ocs(), e.dxf.elevation
+            rows = e.get_points("xyb")
+            pts = [_xy(ocs.to_wcs((x, y, elev))) for x, y, _ in rows]
+            bulges = [b for _, _, b in rows]
+            return _vertex_chunks(pts, bulges, e.closed, e.dxf.extrusion[2] < 0, scale, tol, _describe(e))
+        if kind == "POLYLINE":
+            return _polyline_chunks(e, scale, tol)
+        if kind == "ARC":
+            return _arc_chunks(e, scale)
+        if kind == "CIRCLE":
+            return [_circle_chunk(e, scale)]
+        if kind == "SPLINE":
+            return [_spline_chunk(e, scale)]
+        if kind == "ELLIPSE":
+            return [_ellipse_chunk(e, scale)]
+    except PatternError as exc:
+        raise PatternError(f"{where}: {_describe(e)}: {exc}") from None
+    return []
+
+
+def _xy(v) -> np.ndarray:
+    return np.array([float(v[0]), float(v[1])])
+
+
+def _vertex_chunks(pts, bulges, closed: bool, flip: bool, scale: float, tol: float, source: str) -> list:
+    """Segments of a (LW)POLYLINE given its WCS vertices (file units) and OCS bulges."""
+    pts = [p * scale for p in pts]
+    bulges = [(-b if flip else b) for b in bulges]  # an OCS seen from below turns the other way in WCS
+    if len(pts) < 2:
+        return []
+    if not closed and len(pts) >= 3 and np.linalg.norm(pts[-1] - pts[0]) <= tol:
+        closed, pts, bulges = True, pts[:-1], bulges[:-1]
+    n = len(pts)
+    edges = [(pts[i], pts[(i + 1) % n], bulges[i]) for i in range(n if closed else n - 1)]
+    edges = [(a, b, bu) for a, b, bu in edges if not np.array_equal(a, b)]  # zero-length edges carry nothing
+    if not edges:
+        return []
+    if not closed and all(bu == 0 for _, _, bu in edges):
+        poly = np.array([edges[0][0]] + [b for _, b, _ in edges])
+        return [_Chunk([Segment("polyline", poly)], source)]
+    segs = [Segment("arc", np.array([a, b]), bulge=bu) if bu != 0 else Segment("line", np.array([a, b]))
+            for a, b, bu in edges]
+    return [_Chunk(segs, source, closed=closed)]
+
+
+def _polyline_chunks(e, scale: float, tol: float) -> list:
+    if not (e.is_2d_polyline or e.is_3d_polyline):
+        return []  # polyface and polygon meshes are not outlines
+    ocs = e.ocs() if e.is_2d_polyline else None
+    pts, bulges = [], []
+    for v in e.vertices:
+        if v.dxf.flags & _VTX_SPLINE_FRAME:
+            continue
+        loc = v.dxf.location
+        pts.append(_xy(ocs.to_wcs(loc) if ocs is not None else loc))
+        bulges.append(float(v.dxf.get("bulge", 0.0)) if ocs is not None else 0.0)
+    flip = ocs is not None and e.dxf.extrusion[2] < 0
+    return _vertex_chunks(pts, bulges, e.is_closed, flip, scale, tol, _describe(e))
+
+
+def _arc_chunks(e, scale: float) -> list:
+    sweep = (e.dxf.end_angle - e.dxf.start_angle) % 360.0
+    p0, p1 = _xy(e.start_point) * scale, _xy(e.end_point) * scale
+    if sweep < 1e-9 or np.array_equal(p0, p1):
+        return [_circle_chunk(e, scale, start_angle=e.dxf.start_angle)]
+    bulge = math.tan(math.radians(sweep) / 4.0)
+    if e.dxf.extrusion[2] < 0:
+        bulge = -bulge
+    return [_Chunk([Segment("arc", np.array([p0, p1]), bulge=bulge)], _describe(e))]
+
+
+def _circle_chunk(e, scale: float, start_angle: float = 0.0) -> _Chunk:
+    """Two half-circle arcs (bulge 1 counter-clockwise in the entity's OCS) starting at start_angle."""
+    ocs, c, r = e.ocs(), e.dxf.center, e.dxf.radius
+    a = math.radians(start_angle)
+    p0 = _xy(ocs.to_wcs((c[0] + r * math.cos(a), c[1] + r * math.sin(a), c[2]))) * scale
+    p1 = _xy(ocs.to_wcs((c[0] - r * math.cos(a), c[1] - r * math.sin(a), c[2]))) * scale
+    b = -1.0 if e.dxf.extrusion[2] < 0 else 1.0
+    segs = [Segment("arc", np.array([p0, p1]), bulge=b), Segment("arc", np.array([p1, p0]), bulge=b)]
+    return _Chunk(segs, _describe(e), closed=True)
+
+
+def _spline_chunk(e, scale: float) -> _Chunk:
+    if e.control_point_count() > 0:
+        ctrl = np.array([_xy(p) for p in e.control_points])
+        degree = int(e.dxf.degree)
+        knots = [float(k) for k in e.knots] or None
+        weights = [float(w) for w in e.weights] or None
+    elif e.fit_point_count() > 0:
+        bs = e.construction_tool()
+        ctrl = np.array([_xy(p) for p in bs.control_points])
+        degree = int(bs.degree)
+        knots = [float(k) for k in bs.knots()]
+        weights = [float(w) for w in bs.weights()] or None
+    else:
+        raise PatternError("SPLINE has neither control points nor fit points")
+    k = len(ctrl)
+    if knots is not None and len(knots) == k + 2 * degree + 1 and e.closed:
+        # a periodic SPLINE may list only the distinct control points: wrap the first `degree` ones
+        ctrl = np.vstack([ctrl, ctrl[:degree]])
+        weights = None if weights is None else weights + weights[:degree]
+    if knots is not None and np.array_equal(knots, open_uniform_knots(len(ctrl), degree)):
+        knots = None  # our own default: keep Segment equality across a round trip
+    seg = Segment("bspline", ctrl * scale, degree=degree, knots=knots, weights=weights)
+    return _Chunk([seg], _describe(e))
+
+
+def _ellipse_chunk(e, scale: float) -> _Chunk:
+    from ezdxf.math import rational_bspline_from_ellipse
+
+    bs = rational_bspline_from_ellipse(e.construction_tool())
+    seg = Segment("bspline", np.array([_xy(p) for p in bs.control_points]) * scale, degree=int(bs.degree),
+                  knots=[float(k) for k in bs.knots()], weights=[float(w) for w in bs.weights()] or None)
+    return _Chunk([seg], _describe(e))
+
+
+def _text(e, scale: float):
+    """(candidate points (m, 2) [m], text) of a TEXT/MTEXT, or None when empty."""
+    if e.dxftype() == "MTEXT":
+        label = e.plain_text().strip()
+        pts = [_xy(e.dxf.insert)]
+    else:
+        label = str(e.dxf.text).strip()
+        ocs = e.ocs()
+        pts = [_xy(ocs.to_wcs(e.dxf.insert))]
+        if e.dxf.hasattr("align_point"):
+            pts.append(_xy(ocs.to_wcs(e.dxf.align_point)))
+    return (np.array(pts) * scale, label) if label else None
+
+
+# -- chaining --------------------------------------------------------------------------------------------
+
+def _chain(chunks: list, tol: float, where: str, scale: float, unit_name: str) -> list:
+    """Closed loops (lists of Segments) from chunks: closed chunks alone, open ones joined end to end."""
+    is_loop = [c.closed or np.linalg.norm(c.end - c.start) <= tol for c in chunks]
+    used = [False] * len(chunks)
+    loops = []
+    for i, c in enumerate(chunks):
+        if used[i]:
+            continue
+        used[i] = True
+        if is_loop[i]:
+            loops.append(list(c.segments))
+            continue
+        segs, start, end = list(c.segments), c.start, c.end
+        while np.linalg.norm(end - start) > tol:
+            best = None  # (distance, index, reverse)
+            for j, d in enumerate(chunks):
+                if used[j] or is_loop[j]:
+                    continue
+                for dist, rev in ((np.linalg.norm(d.start - end), False), (np.linalg.norm(d.end - end), True)):
+                    if best is None or dist < best[0]:
+                        best = (dist, j, rev)
+            if best is None or best[0] > tol:
+                raise PatternError(_gap_message(where, chunks, used, is_loop, start, end, tol, scale, unit_name))
+            _, j, rev = best
+            used[j] = True
+            nxt = chunks[j].reversed() if rev else chunks[j]
+            segs.extend(nxt.segments)
+            end = nxt.end
+        loops.append(segs)
+    return loops
+
+
+def _gap_message(where, chunks, used, is_loop, start, end, tol, scale, unit_name) -> str:
+    """Where a chain stops: its open end and the nearest free endpoint (or the chain's start), file units."""
+    others = [start] + [p for j, c in enumerate(chunks) if not used[j] and not is_loop[j] for p in (c.start, c.end)]
+    near = min(others, key=lambda p: np.linalg.norm(p - end))
+    gap = np.linalg.norm(near - end)
+
+    def fmt(p):
+        return f"({p[0] / scale:.6g}, {p[1] / scale:.6g}) {unit_name}"
+
+    return (f"{where}: the entities do not close into a loop: the open end at {fmt(end)} is "
+            f"{gap / scale:.4g} {unit_name} from the nearest free endpoint at {fmt(near)} "
+            f"(tolerance {tol / scale:.3g} {unit_name})")
+
+
+def _snap(segs: list) -> list:
+    """Make each junction exact: move the next segment's start onto the previous end, or, when that start is
+    an evaluated (unclamped spline) point, the previous end onto it."""
+    segs = list(segs)
+    n = len(segs)
+    for i in range(n):
+        j = (i + 1) % n
+        e, s = segs[i].end, segs[j].start
+        if np.array_equal(e, s):
+            continue
+        if segs[j].end_movable(0):
+            segs[j] = segs[j]._moved_end(0, e)
+        elif segs[i].end_movable(-1):
+            segs[i] = segs[i]._moved_end(-1, s)
+    return segs
+
+
+def _corner_names(segs: list, texts: list, tol: float) -> list:
+    """Corner names from texts lying on corners (nearest corner within tol, first text wins); else "c<i>"."""
+    corners = np.array([s.start for s in segs])
+    names = [None] * len(segs)
+    for pts, label in texts:
+        d = np.linalg.norm(corners[:, None, :] - pts[None, :, :], axis=2).min(axis=1)
+        for i in np.argsort(d, kind="stable"):
+            if d[i] > tol:
+                break
+            if names[i] is None:
+                names[i] = label
+                break
+    return [nm if nm is not None else f"c{i}" for i, nm in enumerate(names)]
+
+
+# ----------------------------------------------------------------------------------------------------------
+# writing
+# ----------------------------------------------------------------------------------------------------------
+
+def write_dxf(pieces, path, units: str = "mm") -> Path:
+    """Write pieces (iterable of PatternPiece, metres) to an R2010 DXF at `path` in `units`; returns the path.
+
+    Each piece on its own layer (the piece name), segments as entities in loop order, corner names as TEXT
+    at the corners (height 1% of the piece size)."""
+    import ezdxf
+    from ezdxf.lldxf.validator import is_valid_layer_name
+
+    path = Path(path)
+    scale = unit_scale(units)
+    pieces = list(pieces)
+    seen: dict[str, str] = {}
+    for p in pieces:
+        if not isinstance(p, PatternPiece):
+            raise PatternError(f"write_dxf: expected PatternPiece objects, got {type(p).__name__}")
+        if not p.name or not is_valid_layer_name(p.name):
+            raise PatternError(f"write_dxf: pattern piece name {p.name!r} is not a valid DXF layer name")
+        if p.name.lower() in seen:  # DXF layer names are case-insensitive
+            raise PatternError(f"write_dxf: pattern pieces {seen[p.name.lower()]!r} and {p.name!r} would share "
+                               f"one DXF layer")
+        seen[p.name.lower()] = p.name
+    doc = ezdxf.new("R2010")
+    doc.units = _UNITS_TO_INSUNITS[units]
+    doc.header["$MEASUREMENT"] = 0 if units == "in" else 1
+    msp = doc.modelspace()
+    for piece in pieces:
+        doc.layers.add(piece.name)
+        attrs = {"layer": piece.name}
+        for seg in piece.segments:
+            _write_segment(msp, seg, scale, attrs)
+        height = 0.01 * piece.size() / scale or 1.0
+        for label, corner in zip(piece.corner_names, piece.corners):
+            msp.add_text(label, height=height, dxfattribs={**attrs, "insert": (*(corner / scale), 0.0)})
+    try:
+        doc.saveas(path)
+    except OSError as exc:
+        raise PatternError(f"cannot write DXF file {path}: {exc}") from None
+    return path
+
+
+def _write_segment(msp, seg: Segment, scale: float, attrs: dict) -> None:
+    pts = seg.points / scale
+    if seg.kind == "line":
+        msp.add_line(tuple(pts[0]), tuple(pts[1]), dxfattribs=attrs)
+    elif seg.kind == "polyline":
+        msp.add_lwpolyline([tuple(p) for p in pts], format="xy", dxfattribs=attrs)
+    elif seg.kind == "arc":
+        msp.add_lwpolyline([(*pts[0], seg.bulge), (*pts[1], 0.0)], format="xyb", dxfattribs=attrs)
+    else:
+        ctrl = [(x, y, 0.0) for x, y in pts]
+        knots = list(seg.knots) if seg.knots is not None else list(open_uniform_knots(len(pts), seg.degree))
+        if seg.weights is not None:
+            msp.add_rational_spline(ctrl, list(seg.weights), degree=seg.degree, knots=knots, dxfattribs=attrs)
+        else:
+            msp.add_open_spline(ctrl, degree=seg.degree, knots=knots, dxfattribs=attrs)
