@@ -61,6 +61,10 @@ def run_scene_file(scene_path, args, recorder=None, entity=None, translation=Non
             rec.close()
     if not quiet:
         print(summary.format())
+        if scene.garment is not None:
+            from .garment.metrics import garment_quality
+
+            print(garment_quality(scene).format())
         if own:
             print(f"open the recording with:  {rerun_command()} {rec.path}")
     return summary, loaded

@@ -2,8 +2,9 @@
 
 One explicit RecordingStream saved to an .rrd file as it goes (so a run that fails midway keeps what
 it recorded). The mesh topology is logged once as static data (for a multilevel cloth: on the timeline,
-again at every level switch, with a metrics/<entity>/level series and an event); each frame logs only the vertex
-positions and normals (Rerun's partial-update pattern). Timelines: "frame" (sequence) and
+again at every level switch, with a metrics/<entity>/level series and an event; for a garment, again when its
+seams merge); each frame logs only the vertex positions and normals (Rerun's partial-update pattern), and for a
+garment the strain map as vertex colours and the seam gap (metrics/<entity>/seam_gap, mm). Timelines: "frame" (sequence) and
 "sim_time" (duration, s). Scalars live under metrics/<entity>/...: energy (three series: kinetic,
 potential, total [J]), strain/max, perf/steps_per_s. Open a recording with `rerun FILE.rrd`.
 """
@@ -13,6 +14,8 @@ from pathlib import Path
 
 import numpy as np
 import rerun as rr
+
+from .garment.metrics import strain_colors, vertex_strain
 
 CLOTH_COLOR = (200, 90, 60, 255)
 PIN_COLOR = (30, 30, 30, 255)
@@ -52,20 +55,26 @@ class Recorder:
         if translation is not None:
             rec.log(entity, rr.Transform3D(translation=np.asarray(translation, np.float32)), static=True)
         rec.log(f"metrics/{entity}/energy", rr.SeriesLines(names=["kinetic", "potential", "total"]), static=True)
-        if scene.refiner is None:
+        if not scene.topology_changes:
             self._log_topology(entity, scene, static=True)
-        else:  # the topology changes at each level switch: log it on the timeline
-            rec.log(f"metrics/{entity}/level", rr.SeriesLines(names="level"), static=True)
+        else:  # the topology changes at each level switch or seam merge: log it on the timeline
+            if scene.refiner is not None:
+                rec.log(f"metrics/{entity}/level", rr.SeriesLines(names="level"), static=True)
             self.log_topology(entity, scene, 0)
+        if scene.sewing is not None:
+            rec.log(f"metrics/{entity}/seam_gap", rr.SeriesLines(names=["max [mm]", "mean [mm]"]), static=True)
 
-    def log_topology(self, entity: str, scene, frame: int) -> None:
-        """The cloth's triangles (and fixed pins) as of `frame`: logged at a multilevel switch."""
+    def log_topology(self, entity: str, scene, frame: int, message: str | None = None) -> None:
+        """The cloth's triangles (and fixed pins) as of `frame`: logged at a multilevel switch or a seam merge,
+        with an event saying what changed (default: the level)."""
         self.stream.set_time("frame", sequence=frame)
         self.stream.set_time("sim_time", duration=scene.state.t)
         self._log_topology(entity, scene, static=False)
         if frame > 0:
-            self.log_event(entity, scene, frame, f"level {scene.level + 1}: {scene.model.data.n_particles} particles, "
-                                                 f"{scene.model.data.n_springs} springs", level="INFO")
+            if message is None:
+                message = (f"level {scene.level + 1}: {scene.model.data.n_particles} particles, "
+                           f"{scene.model.data.n_springs} springs")
+            self.log_event(entity, scene, frame, message, level="INFO")
 
     def _log_topology(self, entity: str, scene, static: bool) -> None:
         rec = self.stream
@@ -114,7 +123,11 @@ class Recorder:
         rec.set_time("sim_time", duration=scene.state.t)
         if len(scene.model.data.triangles):
             x, normals = scene.surface()
-            rec.log(f"{entity}/mesh", rr.Mesh3D.from_fields(vertex_positions=x, vertex_normals=normals))
+            colors = None
+            if scene.garment is not None:  # the strain map of a garment
+                colors = strain_colors(vertex_strain(scene.model.data, x))
+            rec.log(f"{entity}/mesh", rr.Mesh3D.from_fields(vertex_positions=x, vertex_normals=normals,
+                                                            vertex_colors=colors))
         else:
             x = scene.positions().astype(np.float32)
             rec.log(f"{entity}/particles", rr.Points3D(x, radii=0.005, colors=CLOTH_COLOR))
@@ -126,6 +139,9 @@ class Recorder:
         rec.log(f"{metrics}/strain/max", rr.Scalars(m.max_strain))
         if scene.refiner is not None:
             rec.log(f"{metrics}/level", rr.Scalars(scene.level + 1))
+        if scene.sewing is not None:
+            gaps = scene.sewing.gaps(x.astype(np.float64))
+            rec.log(f"{metrics}/seam_gap", rr.Scalars([1e3 * gaps.max(), 1e3 * gaps.mean()] if len(gaps) else [0.0, 0.0]))
         if steps_per_s is not None:
             rec.log(f"{metrics}/perf/steps_per_s", rr.Scalars(steps_per_s))
         self.frames_logged += 1

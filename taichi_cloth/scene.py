@@ -20,6 +20,7 @@ from .contacts import Contacts
 from .diagnostics import Diagnostics, Measurement
 from .errors import BlowUpError, SceneError
 from .forces import ForceModel
+from .garment.garment import GarmentCloth
 from .integrators import integrator_class
 from .model import Model, State, omega_max_bound
 from .multilevel_cloth import MultilevelCloth
@@ -53,6 +54,7 @@ class RunSummary:
     stats: dict = field(default_factory=dict)
     blowup: str | None = None
     levels: list = field(default_factory=list)  # LevelSwitch history of a multilevel cloth
+    events: list[str] = field(default_factory=list)  # what happened on the way (seams closed and joined, ...)
     outputs: list[str] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
 
@@ -82,6 +84,8 @@ class RunSummary:
                          f"(elastic {f.elastic:.4g}, gravity {f.gravity:.4g}), total {f.total:.4g} J")
             lines.append(f"  max strain: {100 * f.max_strain:.2f} % now, {100 * self.max_strain_seen:.2f} % peak; "
                          f"max speed {f.max_speed:.3g} m/s")
+        for e in self.events:
+            lines.append(f"  {e}")
         if self.levels:
             lines.append("  levels: " + " -> ".join(f"{s.level + 1} (t = {s.t:.3g} s)" for s in self.levels))
         for k, v in self.stats.items():
@@ -97,8 +101,9 @@ class RunSummary:
 class Scene:
     """A cloth, an integrator and only the components named.
 
-    cloth:              ClothData (from ClothBuilder), a Model, or a MultilevelCloth (ClothBuilder.multilevel_grid):
-                        the scene then starts on its start level and refines as the drape settles
+    cloth:              ClothData (from ClothBuilder), a Model, a MultilevelCloth (ClothBuilder.multilevel_grid):
+                        the scene then starts on its start level and refines as the drape settles, or a
+                        GarmentCloth (taichi_cloth.garment): the scene sews its seams, joins them and drapes on
     integrator:         "explicit" | "verlet" | "central-difference" | "approx-implicit" | "implicit"
     dt:                 time step [s]
     integrator_options: dict of the integrator's OPTIONS
@@ -115,6 +120,8 @@ class Scene:
                         start level), angle (local refinement: dihedral angle [deg] that calls for it, default
                         20) and dt_growth (time step multiplier per level below the finest; dt is the finest
                         level's step; default 1)
+    sewing:             for a GarmentCloth: SewingOptions keyword arguments (close_speed, max_force, epsilon,
+                        energy_tolerance, gravity, join, join_stiffness, max_time); defaults when omitted
     fps:                frames per simulated second for run() and recording; substeps = round(1/(fps dt))
     step_guard:         what to do when an explicit integrator's dt exceeds its stable bound: warn/refuse/off
     max_speed [m/s], max_strain [-]: beyond these (or at any NaN) a run is declared blown up
@@ -123,7 +130,8 @@ class Scene:
     def __init__(self, cloth: ClothData | Model | MultilevelCloth, *, name: str = "cloth", integrator: str = "approx-implicit",
                  dt: float = 1.0 / 240.0, integrator_options: dict | None = None, gravity=(0.0, -9.81, 0.0),
                  air_damping: float = 0.1, pins=(), wind: dict | None = None, stretch_limit: dict | None = None,
-                 colliders=(), self_collision=False, multilevel: dict | None = None, fps: float = 60.0,
+                 colliders=(), self_collision=False, multilevel: dict | None = None, sewing: dict | None = None,
+                 fps: float = 60.0,
                  precision: str = "f32", step_guard: str = "warn", max_speed: float = 200.0, max_strain: float = 10.0,
                  base_dir=None):
         if not dt > 0 or not math.isfinite(dt):
@@ -136,12 +144,20 @@ class Scene:
         self.multilevel_cloth = cloth if isinstance(cloth, MultilevelCloth) else None
         if multilevel is not None and self.multilevel_cloth is None:
             raise SceneError("[multilevel] needs a cloth built as a 4-8 hierarchy (ClothBuilder.multilevel_grid)")
+        self.garment = cloth if isinstance(cloth, GarmentCloth) else None
+        if sewing is not None and self.garment is None:
+            raise SceneError("[sewing] needs a garment cloth (a garment file, or taichi_cloth.garment.build_garment)")
+        if self.garment is not None and self_collision:
+            raise SceneError("self_collision is not supported on a garment yet (merging the seams changes its "
+                             "triangles)")
         if self.multilevel_cloth is not None:
             if self_collision:
                 raise SceneError("self_collision is not supported on a multilevel cloth yet (its triangle grid "
                                  "would have to be rebuilt at every level switch)")
             ml = self.multilevel_cloth
             self.model = Model(ml.levels[ml.start_level], precision, capacity=ml.capacity)
+        elif self.garment is not None:
+            self.model = Model(self.garment.data, precision)
         else:
             self.model = cloth if isinstance(cloth, Model) else Model(cloth, precision)
         self.state = State(self.model)
@@ -151,6 +167,8 @@ class Scene:
         self.warnings: list[str] = []
 
         self.pin_specs = [p if isinstance(p, PinSpec) else PinSpec(**p) for p in pins]
+        if self.garment is not None and len(self.garment.fixed):
+            self.pin_specs.append(PinSpec(near=self.garment.fixed_targets))
         moving = [spec for spec in self.pin_specs if spec.path is not None]
         self.pins: PinDriver | None = None
         if moving:
@@ -186,6 +204,15 @@ class Scene:
             self.integrator.attach_levels(ml.hierarchy.levels, ml.levels, [self._pinned_on(d) for d in ml.levels],
                                           ml.start_level)
         self.stretch_limit = StretchLimit(self.model, self.state, **stretch_limit) if stretch_limit else None
+        self.sewing = None
+        if self.garment is not None:
+            from .garment.sewing import Sewing, SewingOptions
+
+            try:
+                options = SewingOptions(**(sewing or {}))
+            except (TypeError, ValueError) as err:
+                raise SceneError(f"sewing: {err}") from None
+            self.sewing = Sewing(self, self.garment, options)
         self.diagnostics = Diagnostics(self.model, self.state, self.forces)
         self._normals: VertexNormals | None = None
         self.steps_taken = 0
@@ -305,6 +332,8 @@ class Scene:
             self.integrator.step(dt)
             if self.pins is not None:
                 self.pins.apply(self.state.t, dt)
+            if self.sewing is not None and self.sewing.active:
+                self.sewing.step(dt)
             if self.stretch_limit is not None:
                 self.stretch_limit.apply(dt)
             if colliders:
@@ -362,12 +391,24 @@ class Scene:
         self.state.t = 0.0
         if self.refiner is not None:
             self.refiner.reset()
+        if self.sewing is not None and self.model.data is not self.garment.data:
+            self._load_level(self.garment.data)
         self.state.reset()
         self.integrator.reset()
         if self.refiner is not None:
             self.integrator.topology_changed(self.level)
+        if self.sewing is not None:
+            self.integrator.topology_changed()
+            if self.stretch_limit is not None:
+                self.stretch_limit.refresh()
+            self.sewing.reset()
         if self.pins is not None:
             self.pins.apply(0.0, None)
+
+    @property
+    def topology_changes(self) -> bool:
+        """True if the cloth's triangles may change during a run (level switches, merged seams)."""
+        return self.refiner is not None or (self.sewing is not None and self.sewing.options.join == "merge")
 
     # ------------------------------------------------------------------ reading
     def positions(self) -> np.ndarray:
@@ -401,6 +442,13 @@ class Scene:
         cells = [("triangle", tri.astype(np.int32))] if len(tri) else [("vertex", np.arange(n, dtype=np.int32)[:, None])]
         meshio.write(path, meshio.Mesh(self.positions(), cells))
         return path
+
+    def _sewing_event(self) -> str:
+        s = self.sewing
+        gap = s.history[-1].max if s.history else 0.0
+        what = {"merge": "pairs merged", "spring": "pairs joined by stiff springs", "none": "seam springs kept"}
+        return (f"seams closed at t = {s.closed_at:.3f} s after {self.steps_taken} steps (largest gap "
+                f"{1e3 * gap:.2f} mm): {what[s.options.join]}; {self.model.data.n_particles} particles now")
 
     # ------------------------------------------------------------------ the loop
     def run(self, frames: int, recorder=None, entity: str | None = None, progress: bool = True,
@@ -454,6 +502,17 @@ class Scene:
                     m = self.measure()
                     if recorder is not None:
                         recorder.log_topology(entity, self, frame)
+                if self.sewing is not None:
+                    was_sewing = self.sewing.active
+                    merged = self.sewing.observe(m)
+                    if was_sewing and self.sewing.joined:
+                        summary.events.append(self._sewing_event())
+                        m = self.measure()
+                        if recorder is not None:
+                            if merged:
+                                recorder.log_topology(entity, self, frame, summary.events[-1])
+                            else:
+                                recorder.log_event(entity, self, frame, summary.events[-1], level="INFO")
                 if recorder is not None and (frame % record_every == 0 or frame == frames):
                     t0 = time.perf_counter()
                     recorder.log_frame(entity, self, frame, m, steps_per_s=n / elapsed if elapsed > 0 else None)
@@ -466,7 +525,10 @@ class Scene:
                 bar.close()
             if self.refiner is not None:
                 summary.levels = list(self.refiner.switches)
+            if self.topology_changes:
                 summary.n_particles, summary.n_springs = self.model.data.n_particles, self.model.data.n_springs
+            if self.sewing is not None:
+                summary.warnings = list(self.warnings)
             if summary.steps:
                 summary.stats = {f"{k} per step": (v - stats_start.get(k, 0)) / summary.steps
                                  for k, v in self._stats().items()}

@@ -11,7 +11,7 @@ and a component whose table is absent is never built. The schema (units in brack
     air_damping = 0.1             # drag rate [1/s]
     self_collision = false        # the cloth against its own triangles (costs a grid rebuild per step)
 
-    [cloth]                       # exactly one source: [cloth.grid] or [cloth.mesh]
+    [cloth]                       # exactly one source: [cloth.grid], [cloth.mesh] or garment = "file.toml"
     material = "cotton"           # preset name, or a [cloth.material] table
     [cloth.grid]
     size = [1.0, 1.0]             # [m]
@@ -49,6 +49,13 @@ and a component whose table is absent is never built. The schema (units in brack
     [multilevel.settle]           # a level is settled when all hold: max_speed [m/s] = 0.05, energy_change = 1e-4
                                   # (|dE| over `window` = 10 frames / (weight x cloth size)); max_time [s] = 3.0
                                   # refines anyway
+    # garment = "skirt.toml"     # a garment file (taichi_cloth.garment.garmentfile): pieces placed around the
+                                  # mannequin, sewn, joined, draped; [cloth] material overrides the file's
+    [sewing]                      # for a garment: close_speed [m/s] = 0.5 (seam rest lengths shrink this fast),
+                                  # max_force [N] = 5 (cap per pair), stiffness [N/m] (default sheet modulus / 2),
+                                  # epsilon [m] = 0.002 and energy_tolerance = 0.01 (when sewing stops), gravity =
+                                  # false (while sewing), join = "merge" | "spring" | "none", join_stiffness [N/m],
+                                  # max_time [s] = 10
     [output]                      # dir = "out", record = true, mesh = true, record_every = 1
 """
 from __future__ import annotations
@@ -61,7 +68,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 from .builder import ClothBuilder
-from .errors import MeshError, SceneError
+from .errors import MeshError, PatternError, SceneError
 from .integrators import INTEGRATORS
 from .material import MATERIALS, Material, material as preset
 from .scene import STEP_GUARDS, Scene
@@ -129,6 +136,12 @@ _KINDS: dict[str, tuple[Callable[[Any], bool], str]] = {
                "a list of [x, y, z] points"),
     "keyframes": (lambda v: isinstance(v, list) and len(v) > 0 and all(_vector(4)(p) for p in v),
                   "a list of [t, dx, dy, dz] rows"),
+    "tables": (lambda v: isinstance(v, list) and len(v) > 0 and all(isinstance(p, dict) for p in v),
+               "a list of inline tables"),
+    "corner": (lambda v: isinstance(v, str) or _is_int(v), "a corner name or index"),
+    "point": (lambda v: isinstance(v, str) or _is_int(v) or _vector(2)(v), "a corner name or index, or [u, v]"),
+    "names": (lambda v: isinstance(v, dict) and all(_is_int(i) for i in v.values()),
+              "a table of corner name = index"),
 }
 
 MATERIAL_TABLE = Table({"preset": Field("str", None, choices=tuple(MATERIALS)),
@@ -153,6 +166,7 @@ SCHEMA = Table({
                        "plane": Field("str", "xy", choices=("xy", "xz", "yz", "zy"))}),
         "mesh": Table({"path": Field("str"), "scale": Field("number", 1.0, _positive),
                        "translate": Field("vec3", [0.0, 0.0, 0.0])}),
+        "garment": Field("str", None),
     }, required=True),
     "integrator": Table({"name": Field("str", choices=tuple(INTEGRATORS)),
                          "dt": Field("number", check=_positive),
@@ -188,6 +202,11 @@ SCHEMA = Table({
                          "window": Field("int", 10, _at_least(1)),
                          "max_time": Field("number", 3.0, _positive)}, always=True),
     }),
+    "sewing": Table({"close_speed": Field("number", 0.5, _positive), "max_force": Field("number", 5.0, _positive),
+                     "epsilon": Field("number", 0.002, _positive), "energy_tolerance": Field("number", 1e-2, _positive),
+                     "gravity": Field("bool", False), "join": Field("str", "merge", choices=("merge", "spring", "none")),
+                     "join_stiffness": Field("number", None, _positive), "max_time": Field("number", 10.0, _positive),
+                     "stiffness": Field("number", None, _positive)}),
     "output": Table({"dir": Field("str", "out"), "record": Field("bool", True), "mesh": Field("bool", True),
                      "record_every": Field("int", 1, _at_least(1))}, always=True),
 })
@@ -306,10 +325,12 @@ def parse_scene(source: str | Path | dict, base_dir: Path | None = None, label: 
     cfg["name"] = cfg["name"] or "scene"
     cfg["_label"], cfg["_base_dir"] = label, base_dir
     cloth = cfg["cloth"]
-    sources = [k for k in ("grid", "mesh") if cloth.get(k) is not None]
+    sources = [k for k in ("grid", "mesh", "garment") if cloth.get(k) is not None]
     if len(sources) != 1:
-        v.fail("[cloth]", "needs exactly one source table, [cloth.grid] or [cloth.mesh]"
+        v.fail("[cloth]", "needs exactly one source: [cloth.grid], [cloth.mesh] or garment = \"file.toml\""
                + (f" (got {' and '.join(sources)})" if sources else ""))
+    if cfg.get("sewing") is not None and cloth.get("garment") is None:
+        v.fail("[sewing]", "needs a garment cloth ([cloth] garment = \"file.toml\")")
     _check_integrator_options(v, cfg["integrator"])
     ml, grid = cfg.get("multilevel"), cloth.get("grid")
     if ml is not None:
@@ -384,6 +405,14 @@ def build_scene(cfg: dict) -> Scene:
         elif cloth_cfg.get("grid") is not None:
             g = cloth_cfg["grid"]
             data = ClothBuilder.grid(g["size"], g["resolution"], mat, g["center"], g["plane"])
+        elif cloth_cfg.get("garment") is not None:
+            from .garment.garmentfile import load_garment
+            from .garment.garment import build_garment
+
+            path = Path(cloth_cfg["garment"])
+            path = path if path.is_absolute() else cfg["_base_dir"] / path
+            spec = load_garment(path, material=mat if cloth_cfg.get("material") else None)
+            data = build_garment(spec, seam_stiffness=(cfg.get("sewing") or {}).get("stiffness"))
         else:
             m = cloth_cfg["mesh"]
             path = Path(m["path"])
@@ -391,6 +420,8 @@ def build_scene(cfg: dict) -> Scene:
             data = ClothBuilder.mesh_file(path, mat, m["scale"], m["translate"])
     except MeshError as exc:
         raise SceneError(f"{label}: [cloth.mesh] path: {exc}") from None
+    except PatternError as exc:
+        raise SceneError(f"{label}: [cloth] garment: {exc}") from None
     integ = dict(cfg["integrator"])
     name, dt, guard = integ.pop("name"), integ.pop("dt"), integ.pop("step_guard")
     pins = [dict(indices=p["indices"], near=p["near"],
@@ -401,11 +432,20 @@ def build_scene(cfg: dict) -> Scene:
                      gravity=cfg["gravity"], air_damping=cfg["air_damping"], pins=pins, wind=cfg.get("wind"),
                      stretch_limit=cfg.get("stretch_limit"), colliders=cfg["colliders"],
                      self_collision=cfg["self_collision"], fps=cfg["fps"], multilevel=_schedule(cfg.get("multilevel")),
-                     precision=cfg["precision"], step_guard=guard, base_dir=cfg["_base_dir"])
+                     sewing=_sewing(cfg.get("sewing"), cloth_cfg), precision=cfg["precision"], step_guard=guard,
+                     base_dir=cfg["_base_dir"])
     except SceneError as exc:
         raise SceneError(f"{label}: {exc}") from None
     except ValueError as exc:  # a component refused its parameters
         raise SceneError(f"{label}: {exc}") from None
+
+
+def _sewing(sewing: dict | None, cloth_cfg: dict) -> dict | None:
+    """The Scene's `sewing` argument: the [sewing] table less the seam stiffness (the builder's), or the
+    defaults ({}) for a garment without one."""
+    if sewing is None:
+        return {} if cloth_cfg.get("garment") is not None else None
+    return {k: v for k, v in sewing.items() if k != "stiffness" and v is not None}
 
 
 def _schedule(ml: dict | None) -> dict | None:

@@ -1,0 +1,142 @@
+"""Quality of a draped garment (seed 004 table 1 and section 4): per piece, the area and boundary-length errors
+between the 2D pattern and its 3D form, the strain of its edges; for the garment, the seam gap, how many
+particles ended inside the body and whether the drape reached static equilibrium.
+
+Errors are relative to the 2D pattern here (the pattern is the reference when a garment is draped, 2D -> 3D):
+area error = |S3D - S2D| / S2D, boundary error = |L3D - L2D| / L2D, each over a piece's own triangles and
+outline (a merged seam particle belongs to both of its pieces). Strain is l / L0 - 1 per triangle edge, with
+L0 from the pattern.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..builder import SpringKind
+
+
+def vertex_strain(data, x: np.ndarray) -> np.ndarray:
+    """(P,) largest |strain| of the structural springs at each particle (x: (P,3) [m]); 0 where none."""
+    x = np.asarray(x, dtype=np.float64)[: data.n_particles]
+    s = data.kind == int(SpringKind.STRUCTURAL)
+    a, b = data.springs[s, 0], data.springs[s, 1]
+    L0 = data.rest_length[s]
+    strain = np.abs(np.linalg.norm(x[b] - x[a], axis=1) / np.maximum(L0, 1e-12) - 1.0)
+    out = np.zeros(data.n_particles)
+    np.maximum.at(out, a, strain)
+    np.maximum.at(out, b, strain)
+    return out
+
+
+def strain_colors(strain: np.ndarray, full_scale: float = 0.1) -> np.ndarray:
+    """(P,4) uint8 RGBA strain map: white at 0, through yellow to red at `full_scale` (10 %) and above."""
+    s = np.clip(np.asarray(strain) / full_scale, 0.0, 1.0)
+    rgba = np.empty((len(s), 4), np.uint8)
+    rgba[:, 0] = 255
+    rgba[:, 1] = (255 * (1.0 - 0.75 * s)).astype(np.uint8)
+    rgba[:, 2] = (255 * np.clip(1.0 - 2.0 * s, 0.0, 1.0)).astype(np.uint8)
+    rgba[:, 3] = 255
+    return rgba
+
+
+@dataclass
+class PieceQuality:
+    """One piece: areas [m^2], boundary lengths [m], relative errors, edge strain (max |strain|, mean |strain|)."""
+
+    name: str
+    area_2d: float
+    area_3d: float
+    boundary_2d: float
+    boundary_3d: float
+    max_strain: float
+    mean_strain: float
+
+    @property
+    def area_error(self) -> float:
+        return abs(self.area_3d - self.area_2d) / self.area_2d
+
+    @property
+    def boundary_error(self) -> float:
+        return abs(self.boundary_3d - self.boundary_2d) / self.boundary_2d
+
+
+@dataclass
+class GarmentQuality:
+    """pieces: PieceQuality list; seam_gap_max / seam_gap_mean [m]; penetrations: particles inside the body
+    (None without a body collider); max_speed [m/s]; static: the drape reached static equilibrium (max speed
+    below `static_speed` and the energy settled); notes: what the table cannot show (open seams...)."""
+
+    pieces: list
+    seam_gap_max: float
+    seam_gap_mean: float
+    penetrations: int | None
+    max_speed: float
+    static: bool
+    notes: list = field(default_factory=list)
+
+    def format(self) -> str:
+        lines = ["| piece | area 2D [cm^2] | area 3D [cm^2] | area error | boundary 2D [cm] | boundary 3D [cm] | "
+                 "boundary error | max strain | mean strain |",
+                 "|---|---|---|---|---|---|---|---|---|"]
+        for p in self.pieces:
+            lines.append(f"| {p.name} | {1e4 * p.area_2d:.0f} | {1e4 * p.area_3d:.0f} | {100 * p.area_error:.2f} % | "
+                         f"{100 * p.boundary_2d:.1f} | {100 * p.boundary_3d:.1f} | {100 * p.boundary_error:.2f} % | "
+                         f"{100 * p.max_strain:.1f} % | {100 * p.mean_strain:.2f} % |")
+        lines.append(f"seam gap: max {1e3 * self.seam_gap_max:.2f} mm, mean {1e3 * self.seam_gap_mean:.2f} mm; "
+                     f"particles inside the body: {'n/a' if self.penetrations is None else self.penetrations}; "
+                     f"static equilibrium: {'yes' if self.static else 'no'} (max speed {1e3 * self.max_speed:.1f} mm/s)")
+        lines += [f"note: {n}" for n in self.notes]
+        return "\n".join(lines)
+
+    def as_dict(self) -> dict:
+        return {"pieces": [{"name": p.name, "area_error": p.area_error, "boundary_error": p.boundary_error,
+                            "max_strain": p.max_strain, "mean_strain": p.mean_strain} for p in self.pieces],
+                "seam_gap_max": self.seam_gap_max, "seam_gap_mean": self.seam_gap_mean,
+                "penetrations": self.penetrations, "static": self.static, "max_speed": self.max_speed}
+
+
+def piece_quality(garment, current_of: np.ndarray, x: np.ndarray) -> list[PieceQuality]:
+    """PieceQuality of every piece of `garment` (a GarmentCloth) for current positions x ((P,3) [m]) in the
+    current numbering; current_of maps the garment's original particles to current ones."""
+    uv = garment.rest_uv()
+    tri0 = garment.data.triangles
+    tri_piece = garment.triangle_pieces()
+    X = np.asarray(x, dtype=np.float64)[current_of]  # positions in the original numbering
+    out = []
+    for k, mesh in enumerate(garment.meshes):
+        t = tri0[tri_piece == k]
+        d1, d2 = uv[t[:, 1]] - uv[t[:, 0]], uv[t[:, 2]] - uv[t[:, 0]]
+        a2 = 0.5 * np.abs(d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0])
+        a3 = 0.5 * np.linalg.norm(np.cross(X[t[:, 1]] - X[t[:, 0]], X[t[:, 2]] - X[t[:, 0]]), axis=1)
+        e = np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
+        e = np.unique(np.sort(e, axis=1), axis=0)
+        L0 = np.linalg.norm(uv[e[:, 1]] - uv[e[:, 0]], axis=1)
+        strain = np.abs(np.linalg.norm(X[e[:, 1]] - X[e[:, 0]], axis=1) / L0 - 1.0)
+        b = garment.boundary_edges(k)
+        out.append(PieceQuality(mesh.piece.name, float(a2.sum()), float(a3.sum()),
+                                float(np.linalg.norm(uv[b[:, 1]] - uv[b[:, 0]], axis=1).sum()),
+                                float(np.linalg.norm(X[b[:, 1]] - X[b[:, 0]], axis=1).sum()),
+                                float(strain.max()), float(strain.mean())))
+    return out
+
+
+def garment_quality(scene, static_speed: float = 0.01) -> GarmentQuality:
+    """The GarmentQuality of a garment scene now. Penetrations count particles whose signed distance to a mesh
+    collider (the body) is negative; static: max speed below `static_speed` [m/s] with the sewing finished."""
+    sewing = scene.sewing
+    x = scene.positions()
+    gaps = sewing.gaps(x)
+    pieces = piece_quality(scene.garment, sewing.current_of, x)
+    from collision.body import MeshCollider
+
+    bodies = [c for c in scene.colliders if isinstance(c, MeshCollider)]
+    penetrations = int(sum(np.count_nonzero(b.signed_distance(x) < 0.0) for b in bodies)) if bodies else None
+    m = scene.measure()
+    notes = []
+    if sewing.active or sewing.gave_up:
+        opened = sewing.open_seams(gaps)
+        notes.append("seams still open: " + (", ".join(f"{k} ({1e3 * v:.1f} mm)" for k, v in opened.items()) or "none"))
+    static = (not sewing.active) and m.max_speed < static_speed
+    return GarmentQuality(pieces, float(gaps.max()) if len(gaps) else 0.0, float(gaps.mean()) if len(gaps) else 0.0,
+                          penetrations, m.max_speed, static, notes)

@@ -1,0 +1,141 @@
+"""Garments: seam pairing, sewing two flat squares, garment-file errors, DXF-sourced garments, and a skirt sewn
+onto the mannequin (seeds 003, 004; ALGORITHMS.md 4.2)."""
+import numpy as np
+import pytest
+
+import taichi_cloth as tc
+from taichi_cloth.errors import PatternError
+from taichi_cloth.garment.garment import FreePlacement, GarmentSpec, build_garment
+from taichi_cloth.garment.garmentfile import load_garment
+from taichi_cloth.garment.metrics import garment_quality
+from taichi_cloth.garment.pattern import PatternPiece
+from taichi_cloth.garment.seams import Seam, SeamSide
+
+GAP = 0.2  # [m] between the two squares
+
+
+def square(name, size=0.2):
+    return PatternPiece.from_polygon(name, [[0, 0], [size, 0], [size, size], [0, size]],
+                                     corner_names=["bl", "br", "tr", "tl"])
+
+
+def two_squares(b_from="bl", b_to="tl", spacing=0.02):
+    """Square A at the origin and square B GAP to its right, in the xy plane; A's right side sewn to B's left."""
+    seam = Seam("middle", SeamSide("A", "br", "tr"), SeamSide("B", b_from, b_to))
+    return GarmentSpec("two squares", [square("A"), square("B")], [seam],
+                       {"A": FreePlacement((0.0, 0.0, 0.0)), "B": FreePlacement((0.2 + GAP, 0.0, 0.0))},
+                       spacing=spacing)
+
+
+def test_seam_pairs_follow_the_picks_never_crosswise():
+    # B picked bottom-to-top like A: against B's counter-clockwise loop, so the flags differ and B is reversed
+    g = build_garment(two_squares("bl", "tl"))
+    assert g.seam_flags["middle"] == (True, False)
+    x = g.data.positions
+    a, b = x[g.seam_pairs[:, 0]], x[g.seam_pairs[:, 1]]
+    assert len(g.seam_pairs) == 11  # 0.2 m at 0.02 m: 10 intervals, 11 points on each side
+    np.testing.assert_allclose(a[:, 1], b[:, 1], atol=1e-12)  # partners at the same height
+    np.testing.assert_allclose(np.linalg.norm(b - a, axis=1), GAP, atol=1e-12)
+    assert a[0, 1] == pytest.approx(0.0) and a[-1, 1] == pytest.approx(0.2)  # point 0 is where the pick started
+
+    # the same side picked top-to-bottom: now it runs crosswise, as picked (point 0 of A meets B's top)
+    g = build_garment(two_squares("tl", "bl"))
+    assert g.seam_flags["middle"] == (True, True)
+    x = g.data.positions
+    a, b = x[g.seam_pairs[:, 0]], x[g.seam_pairs[:, 1]]
+    np.testing.assert_allclose(a[:, 1] + b[:, 1], 0.2, atol=1e-12)
+
+
+def test_two_squares_close_below_epsilon_and_stay_below_the_stretch_limit():
+    g = build_garment(two_squares())
+    scene = tc.Scene(g, integrator="implicit", dt=1 / 240, gravity=(0, 0, 0), stretch_limit=dict(max_strain=0.1),
+                     sewing=dict(close_speed=0.5, epsilon=0.002))
+    summary = scene.run(60, progress=False)  # 1 s
+    sewing = scene.sewing
+    assert sewing.joined and not sewing.gave_up
+    # the ramp needs GAP / close_speed = 0.4 s; sewing must have stopped within twice that
+    assert sewing.closed_at <= 0.8
+    closing = [h for h in sewing.history if h.t <= sewing.closed_at + 1e-9]
+    assert closing[-1].max < 0.002
+    # merged: one particle per pair, so the particle count drops by the number of pairs
+    assert summary.n_particles == g.data.n_particles - len(g.seam_pairs)
+    q = garment_quality(scene)
+    assert q.seam_gap_max == 0.0
+    for piece in q.pieces:
+        assert piece.max_strain < 0.1  # the stretch limit held through sewing and merging
+        assert piece.area_error < 1e-3  # the squares stay flat and unstretched
+    # no gravity, no pins, no colliders: internal forces and the merge conserve momentum (which starts at 0)
+    momentum = (scene.model.data.mass[:, None] * scene.velocities()).sum(0)
+    assert np.abs(momentum).max() < 1e-6
+    # the merged seam is bent like the cloth: bend springs now span it
+    x = scene.positions()
+    assert np.ptp(x[:, 2]) < 1e-6 and np.ptp(x[:, 0]) == pytest.approx(0.4, abs=0.01)
+
+
+def test_join_by_stiff_springs_keeps_the_particles():
+    g = build_garment(two_squares())
+    scene = tc.Scene(g, integrator="implicit", dt=1 / 240, gravity=(0, 0, 0), sewing=dict(join="spring"))
+    scene.run(60, progress=False)
+    assert scene.sewing.joined and scene.model.data.n_particles == g.data.n_particles
+    assert scene.sewing.gaps().max() < 0.002
+
+
+GOOD = """
+name = "pair"
+units = "cm"
+spacing = 4
+[[pieces]]
+name = "A"
+outline = [{at = [0, 0], name = "bl"}, {at = [20, 0], name = "br"}, {at = [20, 20], name = "tr"},
+           {at = [0, 20], name = "tl"}]
+placement = {origin = [0, 0, 0]}
+[[pieces]]
+name = "B"
+copy = "A"
+placement = {origin = [40, 0, 0]}
+[[seams]]
+name = "middle"
+a = {piece = "A", from = "br", to = "tr"}
+b = {piece = "B", from = "bl", to = "tl"}
+"""
+
+
+def _garment_file(tmp_path, text):
+    p = tmp_path / "g.toml"
+    p.write_text(text)
+    return p
+
+
+def test_garment_file_loads_in_its_units(tmp_path):
+    spec = load_garment(_garment_file(tmp_path, GOOD))
+    assert spec.spacing == pytest.approx(0.04)
+    assert spec.piece("B").area() == pytest.approx(0.04)
+    g = build_garment(spec)
+    assert len(g.seam_pairs) == 6
+
+
+@pytest.mark.parametrize("change, words", [
+    (("b = {piece = \"B\"", "b = {piece = \"C\""), ["seam", "middle", "'C'"]),
+    (("spacing = 4", "spacing = -4"), ["spacing"]),
+    (("{at = [20, 20], name = \"tr\"}", "{at = [0, 10], name = \"tr\"}, {at = [20, 20], name = \"x\"}"),
+     ["'A'", "intersect"]),
+])
+def test_bad_garment_file_gets_one_clear_error(tmp_path, change, words):
+    text = GOOD.replace(*change)
+    assert text != GOOD
+    with pytest.raises(PatternError) as err:
+        build_garment(load_garment(_garment_file(tmp_path, text)))
+    msg = str(err.value)
+    assert "\n" not in msg
+    for w in words:
+        assert w in msg
+
+
+def test_open_outline_is_an_error():
+    a = PatternPiece.from_polygon("open", [[0, 0], [1, 0], [1, 1]])
+    from taichi_cloth.garment.pattern import Segment
+
+    broken = PatternPiece("open", [a.segments[0], a.segments[1],
+                                   Segment("line", np.array([[1.0, 1.0], [0.0, 0.1]]))], ["c0", "c1", "c2"])
+    with pytest.raises(PatternError, match="open"):
+        broken.validate()
