@@ -15,7 +15,7 @@ $(VENV)/.installed: pyproject.toml
 	touch $@
 
 demo: $(VENV)/.installed
-	$(PY) demos/hanging_cloth.py --out $(OUT)
+	$(PY) demos/sew_tshirt.py --out $(OUT)
 
 test: $(VENV)/.installed
 	$(PY) -m pytest

@@ -447,8 +447,9 @@ class Scene:
         s = self.sewing
         gap = s.history[-1].max if s.history else 0.0
         what = {"merge": "pairs merged", "spring": "pairs joined by stiff springs", "none": "seam springs kept"}
-        return (f"seams closed at t = {s.closed_at:.3f} s after {self.steps_taken} steps (largest gap "
-                f"{1e3 * gap:.2f} mm): {what[s.options.join]}; {self.model.data.n_particles} particles now")
+        return (f"seams closed at t = {s.closed_at:.3f} s after {self.steps_taken} steps and {s.wall:.2f} s of wall "
+                f"time, compiles included (largest gap {1e3 * gap:.2f} mm): {what[s.options.join]}; "
+                f"{self.model.data.n_particles} particles now")
 
     # ------------------------------------------------------------------ the loop
     def run(self, frames: int, recorder=None, entity: str | None = None, progress: bool = True,

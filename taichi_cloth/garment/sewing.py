@@ -13,6 +13,7 @@ particle each (default; seed 003's alternative, a very stiff short spring, is jo
 get bend springs across them, gravity comes back on if it was off while sewing, and the drape continues.
 """
 
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -67,6 +68,7 @@ class Sewing:
     """Closes the seams of a scene whose cloth is a GarmentCloth (built by Scene; one kernel, compiled once).
 
     active:     True while sewing; closed_at: simulated time [s] the seams closed (None before)
+    wall:       wall-clock seconds from the first sewing step to the join (kernel compiles included)
     history:    list of SeamGap, one per observed frame (also after joining, measured on the joined pairs)
     current_of: (P0,) int64 the current particle of every original particle (identity until a merge)
     """
@@ -85,6 +87,8 @@ class Sewing:
     def reset(self) -> None:
         self.active = self.count > 0
         self.closed_at = None
+        self.wall = None
+        self._wall0 = None
         self.joined = False
         self.gave_up = False
         self._energy = None
@@ -95,6 +99,8 @@ class Sewing:
     # ------------------------------------------------------------------ per step
     def step(self, dt: float) -> None:
         """Shrink the seam springs' rest lengths (ramp and force cap)."""
+        if self._wall0 is None:
+            self._wall0 = time.perf_counter()
         self._ramp(self.first, self.count, self.options.close_speed * dt, self.options.max_force)
 
     @ti.kernel
@@ -149,6 +155,7 @@ class Sewing:
 
     # ------------------------------------------------------------------ joining
     def _join(self) -> bool:
+        self.wall = time.perf_counter() - self._wall0 if self._wall0 is not None else 0.0
         self.active = False
         self.joined = True
         self.scene.forces.set_gravity(self.gravity)
