@@ -29,7 +29,7 @@ class SettleCriterion:
                    (total mass [kg] x gravity [m/s^2] x the cloth's rest diameter [m]);
     window:        frames in the energy comparison (also the fewest frames spent on a level);
     max_time:      simulated seconds after which a level is refined even if not settled (None: never).
-    Seams closed (garments) will join this list when sewing exists.
+    (A garment has its own criterion for when sewing stops: taichi_cloth.garment.sewing.)
     """
 
     max_speed: float = 0.05

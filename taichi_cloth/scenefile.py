@@ -302,6 +302,21 @@ class LoadedScene:
     config: dict = field(repr=False, default_factory=dict)
 
 
+def read_toml(path: Path, label: str, what: str, error=SceneError) -> dict:
+    """The TOML file at `path` as a dict, its `name` defaulting to the file's stem; `error` (naming `label`)
+    if it is missing, not TOML or not UTF-8 text. `what` says which kind of file ("scene", "garment")."""
+    if not path.is_file():
+        raise error(f"{label}: no such {what} file")
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except tomllib.TOMLDecodeError as exc:
+        raise error(f"{label}: not valid TOML: {exc}") from None
+    except UnicodeDecodeError:
+        raise error(f"{label}: not a UTF-8 text file") from None
+    data.setdefault("name", path.stem)
+    return data
+
+
 def parse_scene(source: str | Path | dict, base_dir: Path | None = None, label: str | None = None) -> dict:
     """Validate a scene (TOML path or dict) and return the config dict with defaults filled in.
     Raises SceneError with one line naming the file, table and key."""
@@ -310,16 +325,8 @@ def parse_scene(source: str | Path | dict, base_dir: Path | None = None, label: 
     else:
         path = Path(source)
         label = label or str(path)
-        if not path.is_file():
-            raise SceneError(f"{label}: no such scene file")
-        try:
-            data = tomllib.loads(path.read_text(encoding="utf-8"))
-        except tomllib.TOMLDecodeError as exc:
-            raise SceneError(f"{label}: not valid TOML: {exc}") from None
-        except UnicodeDecodeError:
-            raise SceneError(f"{label}: not a UTF-8 text file") from None
+        data = read_toml(path, label, "scene")
         base_dir = base_dir or path.parent
-        data.setdefault("name", path.stem)
     v = _Validator(label)
     cfg = v.table(SCHEMA, data, "", "")
     cfg["name"] = cfg["name"] or "scene"

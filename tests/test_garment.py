@@ -195,3 +195,22 @@ def test_skirt_sews_onto_the_mannequin(body):
     # just above the waist (it would fall to the floor, or stay where placed, if the drape or the body failed)
     top = scene.positions()[:, 1].max()
     assert body.landmarks["hips"] < top < body.landmarks["waist"] + 0.03
+
+
+def test_garment_file_with_an_open_dxf_outline_names_the_layer(tmp_path):
+    import ezdxf
+
+    doc = ezdxf.new("R2010")
+    doc.header["$INSUNITS"] = 5  # cm
+    msp = doc.modelspace()
+    for a, b in (((0, 0), (20, 0)), ((20, 0), (20, 20)), ((20, 20), (0, 20))):  # the left side is missing
+        msp.add_line(a, b, dxfattribs={"layer": "A"})
+    doc.saveas(tmp_path / "open.dxf")
+    text = GOOD.replace('units = "cm"', 'units = "cm"\ndxf = "open.dxf"').replace(
+        'outline = [{at = [0, 0], name = "bl"}, {at = [20, 0], name = "br"}, {at = [20, 20], name = "tr"},\n'
+        '           {at = [0, 20], name = "tl"}]\n', "")
+    assert "outline" not in text
+    with pytest.raises(PatternError) as err:
+        load_garment(_garment_file(tmp_path, text))
+    msg = str(err.value)
+    assert "open.dxf" in msg and "layer 'A'" in msg and "do not close" in msg and "\n" not in msg, msg

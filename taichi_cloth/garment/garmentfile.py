@@ -38,12 +38,11 @@ taichi_cloth.garment.placement. Bad input gets one PatternError naming the file,
 from __future__ import annotations
 
 import dataclasses
-import tomllib
 from pathlib import Path
 
 from ..errors import PatternError, SceneError
 from ..material import Material
-from ..scenefile import MATERIAL_TABLE, Array, Field, Table, _Validator, _positive, _nonneg
+from ..scenefile import MATERIAL_TABLE, Array, Field, Table, _nonneg, _positive, _Validator, read_toml
 from .garment import FixedPoint, FreePlacement, GarmentSpec
 from .pattern import PatternPiece, unit_scale
 from .placement import Placement
@@ -77,15 +76,7 @@ def load_garment(path, material: Material | None = None) -> GarmentSpec:
     """Parse a garment file into a GarmentSpec (lengths in metres). `material` overrides the file's."""
     path = Path(path)
     label = str(path)
-    if not path.is_file():
-        raise PatternError(f"{label}: no such garment file")
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except tomllib.TOMLDecodeError as exc:
-        raise PatternError(f"{label}: not valid TOML: {exc}") from None
-    except UnicodeDecodeError:
-        raise PatternError(f"{label}: not a UTF-8 text file") from None
-    data.setdefault("name", path.stem)
+    data = read_toml(path, label, "garment", PatternError)
     try:
         cfg = _Validator(label).table(GARMENT_SCHEMA, data, "", "")
     except SceneError as exc:
