@@ -214,3 +214,56 @@ def test_garment_file_with_an_open_dxf_outline_names_the_layer(tmp_path):
         load_garment(_garment_file(tmp_path, text))
     msg = str(err.value)
     assert "open.dxf" in msg and "layer 'A'" in msg and "do not close" in msg and "\n" not in msg, msg
+
+
+def test_seam_errors_name_the_seam():
+    long_b = PatternPiece.from_polygon("B", [[0, 0], [0.2, 0], [0.2, 0.3], [0, 0.3]],
+                                       corner_names=["bl", "br", "tr", "tl"])
+    spec = two_squares()
+    spec.pieces[1] = long_b  # B's left side is 0.3 m against A's 0.2 m: 33 % apart
+    with pytest.raises(PatternError, match=r"seam 'middle' cannot pair: .*20\.0 cm.*30\.0 cm"):
+        build_garment(spec)
+    with pytest.raises(PatternError, match=r"seam 'middle'.*'nowhere'"):
+        build_garment(two_squares("bl", "nowhere"))
+
+
+def test_mesh_quality_counts_slivers_and_inverted_triangles():
+    from taichi_cloth.garment.mesh import check_quality, mesh_quality
+
+    uv = np.array([[0, 0], [1, 0], [0, 1], [0.5, 0.01]], dtype=float)
+    q = mesh_quality(uv, np.array([[0, 1, 2], [0, 1, 3], [0, 2, 1]]))  # good, a sliver, clockwise
+    assert (q.n_triangles, q.inverted, q.slivers) == (3, 1, 1)
+    assert q.min_angle == pytest.approx(np.degrees(np.arctan2(0.01, 0.5)), rel=1e-6)
+    with pytest.raises(PatternError, match="piece 'p'.*inverted"):
+        check_quality("p", q)
+
+
+def test_multilevel_meshing_keeps_seams_paired_on_every_level():
+    spec = two_squares(spacing=0.02)
+    spec.levels = 3
+    g = build_garment(spec)  # the finest level is simulated, at the garment's spacing
+    assert len(g.seam_pairs) == 11
+    for mesh in g.meshes:
+        assert len(mesh.hierarchy.levels) == 3 and mesh.level == 2
+        counts = [len(lev.boundary_segments[1]) for lev in mesh.hierarchy.levels]
+        assert counts == [6, 6, 11]  # 5 intervals at 0.04 m, then 10 at 0.02 m (4-8: 2**(L // 2))
+
+
+def test_fixed_points_hold_while_the_rest_falls():
+    from taichi_cloth.garment.garment import FixedPoint
+
+    spec = two_squares()
+    spec.fixed = [FixedPoint("A", "tl")]
+    g = build_garment(spec)
+    held = g.data.positions[g.fixed].copy()
+    np.testing.assert_allclose(held, [[0.0, 0.2, 0.0]], atol=1e-12)
+    spec.fixed = [FixedPoint("A", (0.001, 0.199))]  # a point in the pattern picks its nearest particle
+    assert build_garment(spec).fixed.tolist() == g.fixed.tolist()
+    scene = tc.Scene(g, integrator="implicit", dt=1 / 240, sewing=dict(gravity=True))
+    scene.run(30, progress=False)
+    x = scene.positions()
+    sewing = scene.sewing
+    np.testing.assert_allclose(x[sewing.current_of[g.fixed]], held, atol=1e-6)
+    com0 = (g.data.mass * g.data.positions[:, 1]).sum() / g.data.mass.sum()
+    com = (scene.model.data.mass * x[:, 1]).sum() / scene.model.data.mass.sum()
+    assert com < com0 - 0.01  # everything else sagged under gravity (on while sewing here)
