@@ -5,7 +5,10 @@ A seam spring is a zero-rest-length spring F = k_s (x_b - x_a). Started at full 
 of centimetres it would fling the boundary through the body, so its rest length starts at the initial gap and
 shrinks every step by close_speed * dt (a ramp), and never below l - max_force / k_s (a cap: the pull of one
 pair stays below max_force). The springs live in the Model with the cloth's own, so every integrator treats them
-alike (implicitly where the integrator is implicit) and they count in the step-limit bound.
+alike (implicitly where the integrator is implicit) and they count in the step-limit bound. With a stiff seam
+spring and an implicit step, a pair closes by at most about max_force / k_s per step (the step all but reaches the
+spring's rest length), so the closing speed is min(close_speed, max_force / (k_s dt)): with the defaults
+(5 N, k_s = 1091 N/m for cotton, dt = 1/120 s) that is 0.5 m/s, the ramp's.
 
 Sewing stops when every pair is closer than `epsilon` and the elastic energy changed by less than
 `energy_tolerance` (relative) over the last frame (seed 004). Then the pairs are joined: merged into one
