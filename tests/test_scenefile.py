@@ -87,7 +87,7 @@ def test_overrides_replace_integrator_and_step(tmp_path):
     (('dt = 0.005', 'dt = 0.005\ncg_tolerance = 1e-3'), "unknown key 'cg_tolerance' for integrator 'approx-implicit'"),
     (('resolution = [6, 6]', 'resolution = [6, 1]'), "[cloth.grid] resolution: must be >= 2 each"),
     (('material = "silk"', 'material = "velvet"'), "[cloth] material: 'velvet' is not one of: silk"),
-    (('[cloth.grid]', '[cloth.mesh]\npath = "x.obj"\n[cloth.grid]'), "needs exactly one source table"),
+    (('[cloth.grid]', '[cloth.mesh]\npath = "x.obj"\n[cloth.grid]'), "needs exactly one source: [cloth.grid], [cloth.mesh] or garment"),
     (('near = [[-0.25, 1.25, 0.0], [0.25, 1.25, 0.0]]', 'near = [1, 2]'), "[[pins]] #1 near: must be a list of [x, y, z]"),
     (('near = [[-0.25, 1.25, 0.0], [0.25, 1.25, 0.0]]', 'keyframes = [[0, 0, 0, 0]]'), "[[pins]] #1: selects nothing"),
     (('frames = 3', 'frames = 3\n[wind]\ncoefficient = 1.0'), "[wind]: missing required key 'velocity'"),
@@ -98,6 +98,7 @@ def test_overrides_replace_integrator_and_step(tmp_path):
     (('frames = 3', 'frames = 3\n[[colliders]]\ntype = "plane"\npoint = [0, 0, 0]\nnormal = [0, 1, 0]\nradius = 1'),
      "[[colliders]] #1: 'radius' is not a plane collider key"),
     (('frames = 3', 'frames = 3\n[[colliders]]\ntype = "cube"'), "[[colliders]] #1 type: 'cube' is not one of: sphere"),
+    (('frames = 3', 'frames = 3\n[sewing]\ngravity = true'), "[sewing]: needs a garment cloth"),
     (('frames = 3', 'frames = 3\nself_collision = "yes"'), "self_collision: must be true or false"),
 ])
 def test_each_mistake_names_its_key(tmp_path, edit, expected):
