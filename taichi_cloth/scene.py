@@ -477,6 +477,8 @@ class Scene:
 
             bar = tqdm(total=frames, unit="frame", desc=self.name, leave=False)
         n = self.substeps
+        if self.sewing is not None and self.sewing.active:
+            self.sewing.start_clock()
         try:
             for frame in range(1, frames + 1):
                 t0 = time.perf_counter()

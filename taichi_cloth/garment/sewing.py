@@ -71,7 +71,8 @@ class Sewing:
     """Closes the seams of a scene whose cloth is a GarmentCloth (built by Scene; one kernel, compiled once).
 
     active:     True while sewing; closed_at: simulated time [s] the seams closed (None before)
-    wall:       wall-clock seconds from the first sewing step to the join (kernel compiles included)
+    wall:       wall-clock seconds from the start of sewing (the first run, or the first step) to the join,
+                kernel compiles included
     history:    list of SeamGap, one per observed frame (also after joining, measured on the joined pairs)
     current_of: (P0,) int64 the current particle of every original particle (identity until a merge)
     """
@@ -102,9 +103,13 @@ class Sewing:
     # ------------------------------------------------------------------ per step
     def step(self, dt: float) -> None:
         """Shrink the seam springs' rest lengths (ramp and force cap)."""
+        self.start_clock()
+        self._ramp(self.first, self.count, self.options.close_speed * dt, self.options.max_force)
+
+    def start_clock(self) -> None:
+        """Start the wall clock of `wall` (once)."""
         if self._wall0 is None:
             self._wall0 = time.perf_counter()
-        self._ramp(self.first, self.count, self.options.close_speed * dt, self.options.max_force)
 
     @ti.kernel
     def _ramp(self, first: ti.i32, count: ti.i32, shrink: ti.f64, max_force: ti.f64):
