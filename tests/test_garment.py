@@ -12,6 +12,7 @@ from taichi_cloth.garment.garmentfile import load_garment
 from taichi_cloth.garment.metrics import garment_quality
 from taichi_cloth.garment.pattern import PatternPiece
 from taichi_cloth.garment.seams import Seam, SeamSide
+from test_recording_and_cli import rows_by_entity
 
 GAP = 0.2  # [m] between the two squares
 
@@ -267,3 +268,18 @@ def test_fixed_points_hold_while_the_rest_falls():
     com0 = (g.data.mass * g.data.positions[:, 1]).sum() / g.data.mass.sum()
     com = (scene.model.data.mass * x[:, 1]).sum() / scene.model.data.mass.sum()
     assert com < com0 - 0.01  # everything else sagged under gravity (on while sewing here)
+
+
+def test_recording_has_the_strain_map_seam_gap_and_merge(tmp_path):
+    g = build_garment(two_squares())
+    scene = tc.Scene(g, integrator="implicit", dt=1 / 240, gravity=(0, 0, 0))
+    rec = tc.Recorder(tmp_path / "sew.rrd")
+    summary = scene.run(45, recorder=rec, progress=False)
+    rec.close()
+    assert scene.sewing.joined and any("seams closed" in e for e in summary.events)
+    got = rows_by_entity(tmp_path / "sew.rrd")
+    static, frames, cols = got["/cloth/mesh"]
+    assert static == 0  # the topology is on the timeline: it changes at the merge
+    assert any("vertex_colors" in c.lower() or "color" in c.lower() for c in cols)
+    assert len(got["/metrics/cloth/seam_gap"][1]) == 46  # frame 0 and every frame after
+    assert len(got["/cloth/events"][1]) == 1  # the merge
