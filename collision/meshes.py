@@ -32,6 +32,25 @@ def edges_of(triangles: np.ndarray):
     return edges, inverse.reshape(-1, 3), counts
 
 
+def connected_components(n: int, pairs: np.ndarray) -> np.ndarray:
+    """Connected-component labels (n,) int64 (the smallest member index) of a graph on n nodes given as edge
+    pairs (k, 2)."""
+    label = np.arange(n)
+    pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+    if len(pairs) == 0:
+        return label
+    a, b = pairs[:, 0], pairs[:, 1]
+    while True:
+        low = np.minimum(label[a], label[b])
+        new = label.copy()
+        np.minimum.at(new, a, low)
+        np.minimum.at(new, b, low)
+        new = new[new]  # pointer jumping: long loops converge in log steps
+        if np.array_equal(new, label):
+            return label
+        label = new
+
+
 def edge_face_counts(triangles: np.ndarray) -> np.ndarray:
     """How many triangles share each undirected edge; shape (E,)."""
     return edges_of(triangles)[2]

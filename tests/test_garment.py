@@ -70,9 +70,14 @@ def test_two_squares_close_below_epsilon_and_stay_below_the_stretch_limit():
     # no gravity, no pins, no colliders: internal forces and the merge conserve momentum (which starts at 0)
     momentum = (scene.model.data.mass[:, None] * scene.velocities()).sum(0)
     assert np.abs(momentum).max() < 1e-6
-    # the merged seam is bent like the cloth: bend springs now span it
+    # the merged seam is bent like the cloth: bend springs now span it, with the flat rest length of the pattern
     x = scene.positions()
     assert np.ptp(x[:, 2]) < 1e-6 and np.ptp(x[:, 0]) == pytest.approx(0.4, abs=0.01)
+    d = scene.model.data
+    bend = d.kind == int(tc.SpringKind.BEND)
+    assert bend.sum() > g.data.count(tc.SpringKind.BEND)
+    length = np.linalg.norm(x[d.springs[bend, 1]] - x[d.springs[bend, 0]], axis=1)
+    np.testing.assert_allclose(length, d.rest_length[bend], rtol=2e-3)
 
 
 def test_join_by_stiff_springs_keeps_the_particles():

@@ -86,7 +86,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from collision.errors import MeshError
-from collision.meshes import edges_of, validate_triangle_mesh
+from collision.meshes import connected_components, edges_of, validate_triangle_mesh
 
 from ..errors import PatternError
 
@@ -155,23 +155,6 @@ def _frame(name, origin, axis, front, part) -> BodyFrame:
 
 # ------------------------------------------------------------------------------------------ mesh slices
 
-def _components(n: int, pairs: np.ndarray) -> np.ndarray:
-    """Connected-component labels (n,) int64 (the smallest member index) of a graph given as edge pairs."""
-    label = np.arange(n)
-    if len(pairs) == 0:
-        return label
-    a, b = pairs[:, 0], pairs[:, 1]
-    while True:
-        low = np.minimum(label[a], label[b])
-        new = label.copy()
-        np.minimum.at(new, a, low)
-        np.minimum.at(new, b, low)
-        new = new[new]  # pointer jumping: long loops converge in log steps
-        if np.array_equal(new, label):
-            return label
-        label = new
-
-
 @dataclass(frozen=True)
 class _Loop:
     centroid: np.ndarray   # (3,) length-weighted centroid of the loop's segments [m]
@@ -206,7 +189,7 @@ class _Mesh:
         fc = cross[self.face_edge]
         two = fc.sum(axis=1) == 2   # a plane crossing a triangle crosses exactly two of its edges
         pairs = local[self.face_edge[two][fc[two]].reshape(-1, 2)]
-        _, comp = np.unique(_components(len(idx), pairs), return_inverse=True)
+        _, comp = np.unique(connected_components(len(idx), pairs), return_inverse=True)
         seg_len = np.linalg.norm(pts[pairs[:, 0]] - pts[pairs[:, 1]], axis=1)
         seg_mid = 0.5 * (pts[pairs[:, 0]] + pts[pairs[:, 1]])
         seg_comp = comp[pairs[:, 0]]
@@ -570,7 +553,7 @@ class Body:
         armpit = _armpit_height(mesh, y0, height)
 
         below = v[:, 1] < armpit
-        comp = _components(len(v), mesh.edges[below[mesh.edges[:, 0]] & below[mesh.edges[:, 1]]])
+        comp = connected_components(len(v), mesh.edges[below[mesh.edges[:, 0]] & below[mesh.edges[:, 1]]])
         arms, arm_masks = {}, {}
         for name, sign, extreme in (("arm_left", 1.0, np.argmax(v[:, 0])), ("arm_right", -1.0, np.argmin(v[:, 0]))):
             if not below[extreme] or comp[extreme] == comp[np.argmin(v[:, 1])]:

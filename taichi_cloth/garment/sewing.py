@@ -22,8 +22,9 @@ from dataclasses import dataclass
 import numpy as np
 import taichi as ti
 
+from collision.meshes import connected_components, edges_of
+
 from ..builder import ClothData, SpringKind
-from ..mesh import interior_edge_opposites
 
 JOINS = ("merge", "spring", "none")
 
@@ -193,26 +194,13 @@ class Sewing:
 
 
 def merge_seams(data: ClothData, garment, x: np.ndarray, v: np.ndarray):
-    """Merge every seam pair of `garment` into one particle (union-find: a corner on two seams merges with
-    all its partners). Mass adds up; position and velocity are mass-weighted means (momentum is conserved).
+    """Merge every seam pair of `garment` into one particle (connected components: a corner on two seams merges
+    with all its partners). Mass adds up; position and velocity are mass-weighted means (momentum is conserved).
     Seam springs go; springs whose ends merged go; new bend springs span every seam edge, with the rest length
     of the two pattern triangles unfolded flat. Returns (ClothData, x, v, current_of (P0,) int64)."""
-    P = data.n_particles
-    parent = np.arange(P)
-
-    def find(i):
-        while parent[i] != i:
-            parent[i] = parent[parent[i]]
-            i = parent[i]
-        return i
-
-    for a, b in garment.seam_pairs:
-        ra, rb = find(int(a)), find(int(b))
-        if ra != rb:
-            parent[max(ra, rb)] = min(ra, rb)
-    roots = np.array([find(i) for i in range(P)])
-    uniq, current_of = np.unique(roots, return_inverse=True)
-    n = len(uniq)
+    roots = connected_components(data.n_particles, garment.seam_pairs)
+    _, current_of = np.unique(roots, return_inverse=True)
+    n = int(current_of.max()) + 1
     mass = np.bincount(current_of, data.mass, minlength=n)
     mx = np.stack([np.bincount(current_of, data.mass * x[:, c], minlength=n) for c in range(3)], 1) / mass[:, None]
     mv = np.stack([np.bincount(current_of, data.mass * v[:, c], minlength=n) for c in range(3)], 1) / mass[:, None]
@@ -224,53 +212,54 @@ def merge_seams(data: ClothData, garment, x: np.ndarray, v: np.ndarray):
     rest, k, kd, kind = (arr[keep][alive] for arr in (data.rest_length, data.stiffness, data.damping, data.kind))
     tris = current_of[data.triangles]
 
-    # bend springs across the new (seam) edges: interior edges of the merged mesh not bent before
-    bend = interior_edge_opposites(tris)
-    have = {tuple(p) for p in np.sort(springs[kind == int(SpringKind.BEND)], axis=1)}
-    new_bend = np.array([p for p in bend if tuple(p) not in have], np.int64).reshape(-1, 2)
-    if len(new_bend):
-        L0 = _hinge_rest_lengths(garment, tris, new_bend)
-        kb = garment.material.bend / np.maximum(L0, 1e-9) ** 2
-        springs = np.concatenate([springs, new_bend])
-        rest = np.concatenate([rest, L0])
+    # bend springs across the new (seam) edges: the hinges of the merged mesh not bent before
+    pairs, L0 = hinges(tris, garment.rest_uv()[data.triangles])
+    bent = np.sort(springs[kind == int(SpringKind.BEND)], axis=1)
+    new = ~_rows_in(pairs, bent)
+    if new.any():
+        kb = garment.material.bend / np.maximum(L0[new], 1e-9) ** 2
+        springs = np.concatenate([springs, pairs[new]])
+        rest = np.concatenate([rest, L0[new]])
         k = np.concatenate([k, kb])
         kd = np.concatenate([kd, garment.material.damping * kb])
-        kind = np.concatenate([kind, np.full(len(new_bend), int(SpringKind.BEND), np.int64)])
+        kind = np.concatenate([kind, np.full(int(new.sum()), int(SpringKind.BEND), np.int64)])
     merged = ClothData(mx, mass, springs, rest, k, kd, kind, tris)
     return merged, mx, mv, current_of
 
 
-def _hinge_rest_lengths(garment, tris: np.ndarray, pairs: np.ndarray) -> np.ndarray:
-    """Rest distance [m] between the two apexes r, s of the triangles hinged on an edge (p, q) when both pattern
-    triangles are unfolded into one plane (each keeps its own 2D side lengths)."""
-    tri_uv = garment.rest_uv()[garment.data.triangles]  # (T, 3, 2) per-triangle pattern coordinates
-    # edge -> the (triangle, apex corner) entries that see it
-    apex_of = {}
-    for t, tri in enumerate(tris):
-        for c in range(3):
-            e = (min(tri[(c + 1) % 3], tri[(c + 2) % 3]), max(tri[(c + 1) % 3], tri[(c + 2) % 3]))
-            apex_of.setdefault(e, []).append((t, c))
-    out = np.zeros(len(pairs))
-    wanted = {tuple(p): i for i, p in enumerate(pairs)}
-    for e, seen in apex_of.items():
-        if len(seen) != 2:
-            continue
-        (t1, c1), (t2, c2) = seen
-        r, s = tris[t1][c1], tris[t2][c2]
-        key = (min(r, s), max(r, s))
-        if key not in wanted:
-            continue
-        sides = []
-        for t, c in ((t1, c1), (t2, c2)):
-            uv = tri_uv[t]
-            p_, q_ = (c + 1) % 3, (c + 2) % 3
-            if tris[t][p_] != e[0]:
-                p_, q_ = q_, p_
-            sides.append((np.linalg.norm(uv[c] - uv[p_]), np.linalg.norm(uv[c] - uv[q_]), np.linalg.norm(uv[q_] - uv[p_])))
-        L = 0.5 * (sides[0][2] + sides[1][2])
-        pts = []
-        for sign, (dp, dq, _) in zip((1.0, -1.0), sides):
-            u = (dp * dp - dq * dq + L * L) / (2 * L)
-            pts.append(np.array([u, sign * np.sqrt(max(dp * dp - u * u, 0.0))]))
-        out[wanted[key]] = np.linalg.norm(pts[0] - pts[1])
-    return out
+def hinges(triangles: np.ndarray, tri_uv: np.ndarray):
+    """For every edge shared by two triangles: the two apexes (K, 2) int64 (sorted), and their rest distance
+    (K,) [m] with both triangles unfolded into one plane, each keeping its own pattern side lengths (tri_uv:
+    (T, 3, 2) [m], the pattern coordinates of each triangle's corners; the two may come from different pieces)."""
+    edges, face_edge, counts = edges_of(triangles)
+    entry = np.argsort(face_edge.reshape(-1), kind="stable")  # (triangle, corner k) entries grouped by edge
+    first = np.searchsorted(face_edge.reshape(-1)[entry], np.nonzero(counts == 2)[0])
+    e1, e2 = entry[first], entry[first + 1]
+
+    def side_lengths(e):
+        t, k = e // 3, e % 3  # edge k runs from corner k to k + 1; the apex is corner k + 2
+        p, q, c = k, (k + 1) % 3, (k + 2) % 3
+        uv = tri_uv[t]
+        rows = np.arange(len(t))
+        L = lambda i, j: np.linalg.norm(uv[rows, i] - uv[rows, j], axis=1)  # noqa: E731
+        return triangles[t, c], triangles[t, p], L(c, p), L(c, q), L(p, q)
+
+    r, p1, rp, rq, L1 = side_lengths(e1)
+    s, p2, sp, sq, L2 = side_lengths(e2)
+    same = p1 == p2  # match the second triangle's sides to the first's edge ends
+    sp, sq = np.where(same, sp, sq), np.where(same, sq, sp)
+    L = 0.5 * (L1 + L2)
+    u1 = (rp**2 - rq**2 + L**2) / (2 * L)
+    u2 = (sp**2 - sq**2 + L**2) / (2 * L)
+    h1 = np.sqrt(np.maximum(rp**2 - u1**2, 0.0))
+    h2 = np.sqrt(np.maximum(sp**2 - u2**2, 0.0))
+    pairs = np.sort(np.stack([r, s], 1), axis=1)
+    return pairs, np.hypot(u1 - u2, h1 + h2)  # the apexes on opposite sides of the edge
+
+
+def _rows_in(rows: np.ndarray, table: np.ndarray) -> np.ndarray:
+    """(n,) bool: which rows of `rows` (n, 2) occur in `table` (m, 2) (int64 pairs)."""
+    if len(table) == 0:
+        return np.zeros(len(rows), dtype=bool)
+    key = lambda a: a[:, 0] * (int(max(rows.max(), table.max())) + 1) + a[:, 1]  # noqa: E731
+    return np.isin(key(rows), key(table))
