@@ -1,4 +1,4 @@
-"""The main demo: a cotton sheet hanging from its two top corners (demos/scenes/hanging_cloth.toml).
+"""The first demo: a cotton sheet hanging from its two top corners (demos/scenes/hanging_cloth.toml).
 
     python demos/hanging_cloth.py [--out DIR] [--frames N] [--integrator NAME] [--dt H] [--arch cpu|gpu]
 
