@@ -1,4 +1,4 @@
-"""Command line: `python -m taichi_cloth run|bench|info`. Demo scripts reuse `run_scene_file`."""
+"""Command line: `python -m taichi_cloth run|flatten|bench|info`. Demo scripts reuse `run_scene_file`."""
 from __future__ import annotations
 
 import argparse
@@ -6,7 +6,7 @@ import shutil
 import sys
 from pathlib import Path
 
-from .errors import BlowUpError, MeshError, SceneError
+from .errors import BlowUpError, MeshError, PatternError, SceneError
 
 EXIT_BAD_INPUT = 2
 EXIT_BLOWUP = 3
@@ -98,6 +98,32 @@ def _cmd_run(args) -> int:
     return 0
 
 
+def _cmd_flatten(args) -> int:
+    """`flatten piece.obj [...] --out pieces.dxf`: flatten 3D pieces, print the error table, write DXF + PNG."""
+    from collision.meshes import load_triangle_mesh
+
+    from . import runtime
+    from .flatten import flatten_pieces, format_table, plot_flat, write_flat_dxf
+    from .garment.pattern import unit_scale
+
+    out = Path(args.out or Path("out") / (Path(args.meshes[0]).stem + ".dxf"))
+    if out.suffix.lower() != ".dxf":
+        print(f"error: --out must name a .dxf file, got {out}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    try:
+        scale = unit_scale(args.units)
+        pieces = [(Path(m).stem, *load_triangle_mesh(m, scale=scale), None) for m in args.meshes]
+        runtime.init(args.arch)
+        flat = flatten_pieces(pieces, tolerance=args.tolerance)
+    except (MeshError, PatternError, ValueError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    out.parent.mkdir(parents=True, exist_ok=True)
+    print(format_table(flat))
+    print(f"wrote {write_flat_dxf(flat, out)} and {plot_flat(flat, out.with_suffix('.png'))}")
+    return 0
+
+
 def _cmd_info(args) -> int:
     import numpy
     import rerun
@@ -130,6 +156,13 @@ def main(argv=None) -> int:
     p_run.add_argument("scene", help="scene file (.toml)")
     add_run_arguments(p_run)
     p_run.set_defaults(func=_cmd_run)
+    p_flat = sub.add_parser("flatten", help="flatten 3D pieces (disc meshes) to 2D: error table, DXF and PNG")
+    p_flat.add_argument("meshes", nargs="+", help="3D piece meshes (OBJ, PLY, STL...), one disc each")
+    p_flat.add_argument("--out", help="DXF to write (default out/<first mesh>.dxf); the error map goes beside it as .png")
+    p_flat.add_argument("--units", default="m", help="length unit of the mesh files: m, cm, mm or in (default m)")
+    p_flat.add_argument("--tolerance", type=float, default=1e-6, help="relative energy change to stop at (default 1e-6)")
+    p_flat.add_argument("--arch", default="cpu", choices=("cpu", "gpu"), help="Taichi arch (default cpu)")
+    p_flat.set_defaults(func=_cmd_flatten)
     p_info = sub.add_parser("info", help="versions, integrators and their options, materials")
     p_info.set_defaults(func=_cmd_info)
     p_bench = sub.add_parser("bench", help="benchmarks: `bench [integrators]` or `bench collision`")

@@ -152,6 +152,29 @@ class Recorder:
         self.stream.set_time("sim_time", duration=scene.state.t)
         self.stream.log(f"{entity}/events", rr.TextLog(text, level=level))
 
+    def log_flat_pieces(self, entity: str, pieces, layouts=None, translation=(0.0, 0.0, 0.0), gap: float = 0.05,
+                        full_scale: float = 0.05) -> None:
+        """Flattened pieces (taichi_cloth.flatten.FlatPiece), static, side by side in the x-y plane from
+        `translation` [m] with `gap` [m] between them: each a mesh coloured by its error map (the mean |edge
+        length error| at each vertex: white at 0, red at `full_scale` and above) and its outline.
+        layouts: optional (V,2) arrays to draw instead of each piece's uv (e.g. aligned to the pattern)."""
+        rec = self.stream
+        layouts = list(layouts) if layouts is not None else [p.uv for p in pieces]
+        x0 = 0.0
+        for piece, uv in zip(pieces, layouts):
+            uv = np.asarray(uv, dtype=np.float64)
+            lo = uv.min(axis=0)
+            pos = np.c_[uv - lo + [x0, 0.0], np.zeros(len(uv))] + np.asarray(translation, dtype=np.float64)
+            x0 += float(np.ptp(uv[:, 0])) + gap
+            path = f"{entity}/{piece.name}"
+            rec.log(f"{path}/mesh", rr.Mesh3D(vertex_positions=pos.astype(np.float32),
+                                              triangle_indices=piece.triangles.astype(np.uint32),
+                                              vertex_colors=strain_colors(piece.vertex_error(), full_scale)),
+                    static=True)
+            outline = pos[np.append(piece.boundary, piece.boundary[0])]
+            rec.log(f"{path}/outline", rr.LineStrips3D([outline.astype(np.float32)], colors=[[20, 20, 20]],
+                                                       radii=0.002), static=True)
+
     def log_points(self, entity: str, points, radius: float = 0.01, color=PIN_COLOR, static: bool = True) -> None:
         """Extra points (e.g. markers), static by default."""
         self.stream.log(entity, rr.Points3D(np.asarray(points, np.float32), radii=radius, colors=color), static=static)

@@ -140,3 +140,18 @@ def garment_quality(scene, static_speed: float = 0.01) -> GarmentQuality:
     static = (not sewing.active) and m.max_speed < static_speed
     return GarmentQuality(pieces, float(gaps.max()) if len(gaps) else 0.0, float(gaps.mean()) if len(gaps) else 0.0,
                           penetrations, m.max_speed, static, notes)
+
+
+def draped_pieces(scene) -> list:
+    """Every piece of a garment scene as it is draped now, ready for taichi_cloth.flatten.flatten_pieces: a list
+    of (name, vertices (n,3) float64 [m], triangles (t,3) int64, corners {corner name: vertex}) in the piece's own
+    numbering (its PieceMesh's: triangles counter-clockwise in the pattern, seen from outside). A particle merged
+    at a seam appears in both of its pieces."""
+    garment = scene.garment
+    x = scene.positions()[scene.sewing.current_of]  # the original numbering
+    out = []
+    for k, mesh in enumerate(garment.meshes):
+        corners = {name: int(seg[0]) for name, seg in zip(mesh.piece.corner_names, mesh.boundary_segments)}
+        out.append((mesh.piece.name, x[garment.offsets[k]: garment.offsets[k + 1]].copy(), mesh.triangles.copy(),
+                    corners))
+    return out
