@@ -13,11 +13,16 @@ class PatternError(TaichiClothError, ValueError):
     """A pattern piece, garment file or DXF file is malformed: the message names the piece, seam or file."""
 
 
+class BodyError(TaichiClothError, ValueError):
+    """A body morph or measurement cannot be done: unknown channel or girth, weight out of range, limit shapes
+    of another topology, a target girth out of reach: the message names the channel, girth or file."""
+
+
 # A mesh is unusable (missing, empty, non-manifold, NaN vertices, degenerate faces): the message names the file.
 # Defined by the collision package (which loads bodies and cloth meshes and must not import taichi_cloth).
 from collision.errors import MeshError  # noqa: E402
 
-__all__ = ["BlowUpError", "MeshError", "PatternError", "SceneError", "TaichiClothError"]
+__all__ = ["BlowUpError", "BodyError", "MeshError", "PatternError", "SceneError", "TaichiClothError"]
 
 
 class BlowUpError(TaichiClothError, RuntimeError):

@@ -86,8 +86,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from collision.errors import MeshError
-from collision.meshes import connected_components, edges_of, validate_triangle_mesh
+from collision.meshes import connected_components, validate_triangle_mesh
 
+# the plane slicer and the convex-hull girth live with the body's girth gauge, which measures the same sections
+from ..body.section import Loop as _Loop
+from ..body.section import MeshSlicer as _Mesh
+from ..body.section import loop_girth as _girth
 from ..errors import PatternError
 
 __all__ = ["ANGLE_BINS", "AXIAL_BIN", "Body", "BodyFrame", "MAX_STRETCH", "MAX_WRAP", "PARTS", "Placement", "REACH",
@@ -151,87 +155,6 @@ def _frame(name, origin, axis, front, part) -> BodyFrame:
     front = front - (front @ axis) * axis
     front = front / np.linalg.norm(front)
     return BodyFrame(name, np.asarray(origin, dtype=np.float64).copy(), axis, front, part)
-
-
-# ------------------------------------------------------------------------------------------ mesh slices
-
-@dataclass(frozen=True)
-class _Loop:
-    centroid: np.ndarray   # (3,) length-weighted centroid of the loop's segments [m]
-    length: float          # polyline perimeter [m]
-    points: np.ndarray     # (k,3) the loop's points [m]
-
-
-class _Mesh:
-    """Vertices, triangles and their unique edges, for plane slices."""
-
-    def __init__(self, vertices, triangles):
-        self.v = vertices
-        self.t = triangles
-        self.edges, self.face_edge, _ = edges_of(triangles)
-
-    def slice(self, origin, normal, vmask=None) -> list[_Loop]:
-        """The closed loops where the plane through origin with normal cuts the surface (restricted to edges
-        whose both ends are in vmask)."""
-        d = (self.v - origin) @ normal
-        da, db = d[self.edges[:, 0]], d[self.edges[:, 1]]
-        cross = (da < 0) != (db < 0)
-        if vmask is not None:
-            cross &= vmask[self.edges[:, 0]] & vmask[self.edges[:, 1]]
-        idx = np.flatnonzero(cross)
-        if len(idx) == 0:
-            return []
-        t = da[idx] / (da[idx] - db[idx])
-        a, b = self.v[self.edges[idx, 0]], self.v[self.edges[idx, 1]]
-        pts = a + t[:, None] * (b - a)
-        local = np.full(len(self.edges), -1)
-        local[idx] = np.arange(len(idx))
-        fc = cross[self.face_edge]
-        two = fc.sum(axis=1) == 2   # a plane crossing a triangle crosses exactly two of its edges
-        pairs = local[self.face_edge[two][fc[two]].reshape(-1, 2)]
-        _, comp = np.unique(connected_components(len(idx), pairs), return_inverse=True)
-        seg_len = np.linalg.norm(pts[pairs[:, 0]] - pts[pairs[:, 1]], axis=1)
-        seg_mid = 0.5 * (pts[pairs[:, 0]] + pts[pairs[:, 1]])
-        seg_comp = comp[pairs[:, 0]]
-        loops = []
-        for c in range(comp.max() + 1):
-            sel = seg_comp == c
-            length = float(seg_len[sel].sum())
-            if length <= 0:
-                continue
-            centroid = (seg_mid[sel] * seg_len[sel, None]).sum(axis=0) / length
-            loops.append(_Loop(centroid, length, pts[comp == c]))
-        return loops
-
-    def level(self, y: float, vmask=None) -> list[_Loop]:
-        return self.slice(np.array([0.0, y, 0.0]), np.array([0.0, 1.0, 0.0]), vmask)
-
-
-def _hull_perimeter(p: np.ndarray) -> float:
-    """Perimeter [m] of the convex hull of 2D points (k,2) (a tape measure's girth)."""
-    pts = sorted(set(map(tuple, np.round(p, 9))))
-    if len(pts) < 3:
-        return 0.0
-
-    def half(points):
-        h = []
-        for q in points:
-            while len(h) >= 2 and ((h[-1][0] - h[-2][0]) * (q[1] - h[-2][1])
-                                   - (h[-1][1] - h[-2][1]) * (q[0] - h[-2][0])) <= 0:
-                h.pop()
-            h.append(q)
-        return h
-
-    hull = np.array(half(pts)[:-1] + half(pts[::-1])[:-1])
-    return float(np.linalg.norm(hull - np.roll(hull, 1, axis=0), axis=1).sum())
-
-
-def _girth(loop: _Loop, normal) -> float:
-    normal = np.asarray(normal, dtype=np.float64)
-    e1 = np.cross(normal, [1.0, 0.0, 0.0] if abs(normal[0]) < 0.9 else [0.0, 1.0, 0.0])
-    e1 /= np.linalg.norm(e1)
-    e2 = np.cross(normal, e1)
-    return _hull_perimeter(np.stack([loop.points @ e1, loop.points @ e2], axis=1))
 
 
 # ------------------------------------------------------------------------------------------- the body
