@@ -1,4 +1,4 @@
-"""Command line: `python -m taichi_cloth run|flatten|bench|info`. Demo scripts reuse `run_scene_file`."""
+"""Command line: `python -m taichi_cloth run|body|flatten|bench|info`. Demo scripts reuse `run_scene_file`."""
 from __future__ import annotations
 
 import argparse
@@ -156,6 +156,9 @@ def main(argv=None) -> int:
     p_run.add_argument("scene", help="scene file (.toml)")
     add_run_arguments(p_run)
     p_run.set_defaults(func=_cmd_run)
+    from .body import cli as body_cli
+
+    body_cli.add_parser(sub)
     p_flat = sub.add_parser("flatten", help="flatten 3D pieces (disc meshes) to 2D: error table, DXF and PNG")
     p_flat.add_argument("meshes", nargs="+", help="3D piece meshes (OBJ, PLY, STL...), one disc each")
     p_flat.add_argument("--out", help="DXF to write (default out/<first mesh>.dxf); the error map goes beside it as .png")

@@ -5,6 +5,7 @@ Spec keys (SI units):
   {"type": "capsule", "a": [x, y, z], "b": [x, y, z], "radius": r}
   {"type": "plane",   "point": [x, y, z], "normal": [nx, ny, nz]}
   {"type": "mesh",    "path": "body.obj" | "mannequin", "scale": 1.0, "translate": [0, 0, 0],
+                      (or "vertices": (V,3) [m] and "triangles": (T,3) arrays, "path" then only names it)
                       "cell_size": None (1.5 x mean edge), "mode": "fuzzy" | "exact",
                       "repulsion": None | {"stiffness": N, "distance": m, "max_force": N}}
   {"type": "standin"}: seed 002's sphere-collider body, a sphere-and-capsule stand-in for the mannequin
@@ -47,7 +48,11 @@ def build_colliders(specs, base_dir: Path | None = None) -> list:
         thickness = spec.get("thickness", DEFAULT_THICKNESS)
         friction = spec.get("friction", DEFAULT_FRICTION)
         if kind == "mesh":
-            v, t = body_mesh(spec["path"], spec.get("scale", 1.0), spec.get("translate", (0.0, 0.0, 0.0)), base_dir)
+            if "vertices" in spec:  # a body given as arrays (e.g. a fitted taichi_cloth.body morph)
+                v, t = spec["vertices"], spec["triangles"]
+            else:
+                v, t = body_mesh(spec["path"], spec.get("scale", 1.0), spec.get("translate", (0.0, 0.0, 0.0)),
+                                 base_dir)
             out.append(MeshCollider(v, t, thickness=thickness, friction=friction, cell_size=spec.get("cell_size"),
                                     mode=spec.get("mode", "fuzzy"), repulsion=spec.get("repulsion"),
                                     source=str(spec["path"])))

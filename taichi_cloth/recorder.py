@@ -86,15 +86,16 @@ class Recorder:
             rec.log(f"{entity}/pins", rr.Points3D(scene.model.data.positions[scene.pinned_indices].astype(np.float32),
                                                   radii=0.01, colors=PIN_COLOR), static=static)
 
-    def log_collider(self, entity: str, description: dict) -> None:
-        """A collider, once, as static data: a body mesh, spheres, capsules and planes (a 4 m square)."""
+    def log_collider(self, entity: str, description: dict, static: bool = True) -> None:
+        """A collider, once, as static data: a body mesh, spheres, capsules and planes (a 4 m square). A body that
+        morphs during the run is logged on the timeline instead (static=False; log_frame moves its vertices)."""
         rec = self.stream
         if description["kind"] == "self":
             return
         if description["kind"] == "mesh":
             rec.log(entity, rr.Mesh3D(vertex_positions=np.asarray(description["vertices"], np.float32),
                                       triangle_indices=np.asarray(description["triangles"], np.uint32),
-                                      albedo_factor=BODY_COLOR), static=True)
+                                      albedo_factor=BODY_COLOR), static=static)
             return
         if description["spheres"]:
             rec.log(f"{entity}/spheres", rr.Ellipsoids3D(
@@ -133,6 +134,11 @@ class Recorder:
             rec.log(f"{entity}/particles", rr.Points3D(x, radii=0.005, colors=CLOTH_COLOR))
         if scene.pins is not None:
             rec.log(f"{entity}/pins", rr.Points3D(x[scene.pinned_indices], radii=0.01, colors=PIN_COLOR))
+        morph = scene.body_morph
+        if morph is not None and morph.changed:  # the body moved: its new vertex positions only
+            rec.log(f"{entity}/colliders/{scene.body_collider_index}",
+                    rr.Mesh3D.from_fields(vertex_positions=morph.vertices.astype(np.float32)))
+            morph.changed = False
         m = measurement
         metrics = f"metrics/{entity}"
         rec.log(f"{metrics}/energy", rr.Scalars([m.kinetic, m.potential, m.total]))

@@ -131,7 +131,7 @@ class Scene:
                  dt: float = 1.0 / 240.0, integrator_options: dict | None = None, gravity=(0.0, -9.81, 0.0),
                  air_damping: float = 0.1, pins=(), wind: dict | None = None, stretch_limit: dict | None = None,
                  colliders=(), self_collision=False, multilevel: dict | None = None, sewing: dict | None = None,
-                 fps: float = 60.0,
+                 body_morph: dict | None = None, fps: float = 60.0,
                  precision: str = "f32", step_guard: str = "warn", max_speed: float = 200.0, max_strain: float = 10.0,
                  base_dir=None):
         if not dt > 0 or not math.isfinite(dt):
@@ -213,6 +213,7 @@ class Scene:
             except (TypeError, ValueError) as err:
                 raise SceneError(f"sewing: {err}") from None
             self.sewing = Sewing(self, self.garment, options)
+        self.body_morph = self._body_morph(body_morph) if body_morph is not None else None
         self.diagnostics = Diagnostics(self.model, self.state, self.forces)
         self._normals: VertexNormals | None = None
         self.steps_taken = 0
@@ -232,6 +233,32 @@ class Scene:
             self.pins.apply(0.0, None)
 
     # ------------------------------------------------------------------ construction helpers
+    def _body_morph(self, options: dict):
+        """The MorphingBody of `body_morph`: keys weights (channel -> [-1, 1]), duration [s], start ([s] or
+        "sewn", default "sewn" for a garment, else 0), blend (default: the shipped mannequin's BlendShapes); it
+        drives the scene's first mesh collider, which must be that blend's base body."""
+        from collision.body import MeshCollider
+
+        from .body import BlendShapes
+        from .body.morphing import MorphingBody
+
+        opts = dict(options)
+        bodies = [c for c in self.colliders if isinstance(c, MeshCollider)]
+        if not bodies:
+            raise SceneError("body_morph needs a mesh collider (the body to morph), e.g. path = \"mannequin\"")
+        blend = opts.pop("blend", None) or BlendShapes.from_mannequin()
+        if bodies[0].n_vertices != len(blend.base):
+            raise SceneError(f"body_morph: the mesh collider {bodies[0].source!r} has {bodies[0].n_vertices} vertices, "
+                             f"the blend shapes' base body {len(blend.base)}: morph the body the scene collides with")
+        opts.setdefault("start", "sewn" if self.sewing is not None else 0.0)
+        try:
+            morph = MorphingBody(blend, collider=bodies[0], **opts)
+            morph.check_speed(self.dt)
+        except TypeError as err:
+            raise SceneError(f"body_morph: {err}") from None
+        self.body_collider_index = self.colliders.index(bodies[0])
+        return morph
+
     @classmethod
     def from_file(cls, path, **overrides) -> "Scene":
         """The Scene of a TOML scene file; overrides as scenefile.load_scene (integrator, dt, precision...).
@@ -326,7 +353,10 @@ class Scene:
     def _advance(self, n: int) -> None:
         dt = self.dt
         colliders = self.colliders
+        morph = self.body_morph
         for _ in range(n):
+            if morph is not None and not morph.done:
+                morph.update(self.state.t, self.sewing is not None and self.sewing.active)
             for c in colliders:
                 c.begin_step()
             self.integrator.step(dt)
@@ -468,7 +498,8 @@ class Scene:
             t0 = time.perf_counter()
             recorder.begin_cloth(entity, self, translation)
             for k, c in enumerate(self.colliders):
-                recorder.log_collider(f"{entity}/colliders/{k}", c.describe())
+                morphing = self.body_morph is not None and k == self.body_collider_index
+                recorder.log_collider(f"{entity}/colliders/{k}", c.describe(), static=not morphing)
             recorder.log_frame(entity, self, 0, self.measure())
             summary.wall_record += time.perf_counter() - t0
         bar = None
@@ -516,6 +547,13 @@ class Scene:
                                 recorder.log_topology(entity, self, frame, summary.events[-1])
                             else:
                                 recorder.log_event(entity, self, frame, summary.events[-1], level="INFO")
+                morph = self.body_morph
+                if morph is not None and morph.done and not morph.reported:
+                    morph.reported = True
+                    summary.events.append(f"body morphed from t = {morph.begin:.3f} s to {morph.begin + morph.duration:.3f} s "
+                                          f"(max vertex travel {1e3 * morph.max_displacement():.1f} mm)")
+                    if recorder is not None:
+                        recorder.log_event(entity, self, frame, summary.events[-1], level="INFO")
                 if recorder is not None and (frame % record_every == 0 or frame == frames):
                     t0 = time.perf_counter()
                     recorder.log_frame(entity, self, frame, m, steps_per_s=n / elapsed if elapsed > 0 else None)

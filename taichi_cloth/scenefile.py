@@ -56,6 +56,12 @@ and a component whose table is absent is never built. The schema (units in brack
                                   # epsilon [m] = 0.002 and energy_tolerance = 0.01 (when sewing stops), gravity =
                                   # false (while sewing), join = "merge" | "spring" | "none", join_stiffness [N/m],
                                   # max_time [s] = 10
+    [body]                        # morph the mannequin to measured girths [m] (taichi_cloth.body; seed 002):
+    waist = 0.80                  # any of chest, underbust, waist, hips, neck, upper_arm, thigh (tape girths)
+    morph = "before"              # "before": the run starts on the morphed body (a garment is placed on it);
+                                  # "during": it starts on the shipped body and morphs over morph_time [s] = 1.0
+                                  # (after the seams are joined, for a garment), the cloth following it
+    tolerance = 0.001             # [m] how close each girth must come; needs a [[colliders]] mesh "mannequin"
     [output]                      # dir = "out", record = true, mesh = true, record_every = 1
 """
 from __future__ import annotations
@@ -74,6 +80,8 @@ from .material import MATERIALS, Material, material as preset
 from .scene import STEP_GUARDS, Scene
 
 _MISSING = object()
+#: the girths a [body] table may set (taichi_cloth.body.GIRTHS; spelled out so parsing imports no scipy)
+BODY_GIRTHS = ("chest", "underbust", "waist", "hips", "neck", "upper_arm", "thigh")
 
 
 # ---------------------------------------------------------------------- a tiny declarative schema
@@ -207,6 +215,9 @@ SCHEMA = Table({
                      "gravity": Field("bool", False), "join": Field("str", "merge", choices=("merge", "spring", "none")),
                      "join_stiffness": Field("number", None, _positive), "max_time": Field("number", 10.0, _positive),
                      "stiffness": Field("number", None, _positive)}),
+    "body": Table({**{g: Field("number", None, _positive) for g in BODY_GIRTHS},
+                   "morph": Field("str", "before", choices=("before", "during")),
+                   "morph_time": Field("number", 1.0, _positive), "tolerance": Field("number", 1e-3, _positive)}),
     "output": Table({"dir": Field("str", "out"), "record": Field("bool", True), "mesh": Field("bool", True),
                      "record_every": Field("int", 1, _at_least(1))}, always=True),
 })
@@ -357,6 +368,12 @@ def parse_scene(source: str | Path | dict, base_dir: Path | None = None, label: 
             v.fail(f"[[pins]] #{k + 1} keyframes", "times must increase strictly")
     for k, col in enumerate(cfg["colliders"]):
         _check_collider(v, col, f"[[colliders]] #{k + 1}")
+    body = cfg.get("body")
+    if body is not None:
+        if not any(body[g] is not None for g in BODY_GIRTHS):
+            v.fail("[body]", f"names no girth: give at least one of {', '.join(BODY_GIRTHS)} [m]")
+        if not any(c["type"] == "mesh" and c.get("path") == "mannequin" for c in cfg["colliders"]):
+            v.fail("[body]", "morphs the mannequin: add [[colliders]] type = \"mesh\", path = \"mannequin\"")
     return cfg
 
 
@@ -403,6 +420,9 @@ def build_scene(cfg: dict) -> Scene:
     """Build the Scene a validated config describes (only the components it names)."""
     label = cfg["_label"]
     cloth_cfg, mat = cfg["cloth"], _material(cfg)
+    body, body_morph, colliders = None, None, cfg["colliders"]
+    if cfg.get("body") is not None:
+        body, body_morph, colliders = _body(cfg["body"], colliders, label)
     try:
         ml = cfg.get("multilevel")
         if ml is not None:
@@ -419,7 +439,7 @@ def build_scene(cfg: dict) -> Scene:
             path = Path(cloth_cfg["garment"])
             path = path if path.is_absolute() else cfg["_base_dir"] / path
             spec = load_garment(path, material=mat if cloth_cfg.get("material") else None)
-            data = build_garment(spec, seam_stiffness=(cfg.get("sewing") or {}).get("stiffness"))
+            data = build_garment(spec, body, seam_stiffness=(cfg.get("sewing") or {}).get("stiffness"))
         else:
             m = cloth_cfg["mesh"]
             path = Path(m["path"])
@@ -437,7 +457,7 @@ def build_scene(cfg: dict) -> Scene:
     try:
         return Scene(data, name=cfg["name"], integrator=name, dt=dt, integrator_options=integ,
                      gravity=cfg["gravity"], air_damping=cfg["air_damping"], pins=pins, wind=cfg.get("wind"),
-                     stretch_limit=cfg.get("stretch_limit"), colliders=cfg["colliders"],
+                     stretch_limit=cfg.get("stretch_limit"), colliders=colliders, body_morph=body_morph,
                      self_collision=cfg["self_collision"], fps=cfg["fps"], multilevel=_schedule(cfg.get("multilevel")),
                      sewing=_sewing(cfg.get("sewing"), cloth_cfg), precision=cfg["precision"], step_guard=guard,
                      base_dir=cfg["_base_dir"])
@@ -445,6 +465,27 @@ def build_scene(cfg: dict) -> Scene:
         raise SceneError(f"{label}: {exc}") from None
     except ValueError as exc:  # a component refused its parameters
         raise SceneError(f"{label}: {exc}") from None
+
+
+def _body(table: dict, colliders: list, label: str):
+    """(garment placement Body or None, the Scene's body_morph or None, collider specs) of a [body] table: the
+    mannequin is fitted to the girths now; "before" puts the fitted body in the mannequin colliders (and places
+    a garment on it), "during" hands its weights to the scene to morph toward."""
+    from .body import fit_body
+    from .errors import BodyError
+
+    girths = {g: table[g] for g in BODY_GIRTHS if table[g] is not None}
+    try:
+        fit = fit_body(girths, tolerance=table["tolerance"])
+    except BodyError as exc:
+        raise SceneError(f"{label}: [body]: {exc}") from None
+    if table["morph"] == "during":
+        return None, {"weights": fit.weights, "duration": table["morph_time"]}, colliders
+    from .garment.placement import Body
+
+    morphed = [dict(c, vertices=fit.vertices, triangles=fit.triangles, path="mannequin (fitted)")
+               if c["type"] == "mesh" and c.get("path") == "mannequin" else c for c in colliders]
+    return Body.from_mesh(fit.vertices, fit.triangles), None, morphed
 
 
 def _sewing(sewing: dict | None, cloth_cfg: dict) -> dict | None:
