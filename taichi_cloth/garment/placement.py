@@ -241,7 +241,6 @@ class _Arm:
     elbow: np.ndarray         # (3,) on the axis
     shoulder: np.ndarray      # (3,) where the armhole plane leaves the top of the shoulder
     cut_normal: np.ndarray    # (3,) armhole plane normal, pointing into the arm
-    girth: float              # upper-arm girth at origin [m]
 
 
 def _analyse_arm(mesh: _Mesh, arm_mask: np.ndarray, armpit: float, sign: float) -> _Arm:
@@ -270,9 +269,14 @@ def _analyse_arm(mesh: _Mesh, arm_mask: np.ndarray, armpit: float, sign: float) 
     normal /= np.linalg.norm(normal)
     near = (np.abs((v - pit) @ normal) < 0.006) & (v[:, 1] > armpit) & (sign * v[:, 0] > 0)
     shoulder = v[near][np.argmax(v[near, 1])] if near.any() else pit
-    arm_loops = mesh.slice(origin, axis, arm_mask)
-    girth = _girth(min(arm_loops, key=lambda lp: np.linalg.norm(lp.centroid - origin)), axis) if arm_loops else 0.0
-    return _Arm(origin, axis, pit, elbow, shoulder, normal, girth)
+    return _Arm(origin, axis, pit, elbow, shoulder, normal)
+
+
+def _arm_girth(mesh: _Mesh, arm: _Arm, arm_mask: np.ndarray) -> float:
+    """Upper-arm girth [m] perpendicular to the axis at the arm frame's origin; arm_mask: every vertex labelled
+    as this arm (the below-armpit piece alone would cut the top of the section off)."""
+    loops = mesh.slice(arm.origin, arm.axis, arm_mask)
+    return _girth(min(loops, key=lambda lp: np.linalg.norm(lp.centroid - arm.origin)), arm.axis) if loops else 0.0
 
 
 def _label_parts(v: np.ndarray, below: np.ndarray, arm_masks: dict, arms: dict) -> np.ndarray:
@@ -488,7 +492,7 @@ class Body:
         shoulder = 0.5 * float(arms["arm_left"].shoulder[1] + arms["arm_right"].shoulder[1])
         landmarks, loops = _torso_landmarks(mesh, labels == "torso", height, armpit, shoulder)
         girths = {name: _loop_girth(loop) for name, loop in loops.items()}
-        girths["upper_arm"] = 0.5 * (arms["arm_left"].girth + arms["arm_right"].girth)
+        girths["upper_arm"] = 0.5 * sum(_arm_girth(mesh, arm, labels == name) for name, arm in arms.items())
         frames = _frames(loops, arms)
         points = {}
         for name, side in (("arm_left", "left"), ("arm_right", "right")):
