@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import importlib
 import shutil
 import sys
 from pathlib import Path
@@ -146,7 +147,8 @@ def _cmd_info(args) -> int:
     return 0
 
 
-BENCH_SUITES = ("integrators", "collision")
+#: `bench SUITE`: modules of taichi_cloth.bench, each with add_arguments(parser) and run(args) -> exit code
+SUITES = ("integrators", "collision")
 
 
 def main(argv=None) -> int:
@@ -168,22 +170,16 @@ def main(argv=None) -> int:
     p_flat.set_defaults(func=_cmd_flatten)
     p_info = sub.add_parser("info", help="versions, integrators and their options, materials")
     p_info.set_defaults(func=_cmd_info)
-    p_bench = sub.add_parser("bench", help="benchmarks: `bench [integrators]` or `bench collision`")
+    p_bench = sub.add_parser("bench", help="benchmarks: `bench [integrators]`, `bench " + "`, `bench ".join(SUITES[1:]) + "`")
     suites = p_bench.add_subparsers(dest="suite", required=True)
-    from . import bench, bench_collision
-
-    for name, module, run, doc in (("integrators", bench, bench.run_bench, "ms per step and real-time factor"),
-                                   ("collision", bench_collision, bench_collision.run, "collision cost on the mannequin")):
-        p_suite = suites.add_parser(name, help=doc)
-        if module is bench:
-            bench.add_bench_arguments(p_suite)
-        else:
-            bench_collision.add_arguments(p_suite)
-            p_suite.add_argument("--arch", default="cpu", choices=("cpu", "gpu"))
-            p_suite.add_argument("--out", default="out/bench")
-        p_suite.set_defaults(func=run)
+    for name in SUITES:
+        module = importlib.import_module(f".bench.{name}", __package__)
+        p_suite = suites.add_parser(name, help=module.__doc__.strip().splitlines()[0],
+                                    description=module.__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+        module.add_arguments(p_suite)
+        p_suite.set_defaults(func=module.run)
     argv = list(sys.argv[1:] if argv is None else argv)
-    if argv and argv[0] == "bench" and (len(argv) == 1 or argv[1] not in BENCH_SUITES + ("-h", "--help")):
+    if argv and argv[0] == "bench" and (len(argv) == 1 or argv[1] not in SUITES + ("-h", "--help")):
         argv.insert(1, "integrators")  # `bench` alone is the integrator benchmark
     args = parser.parse_args(argv)
     return args.func(args)

@@ -1,4 +1,6 @@
-"""`python -m taichi_cloth bench collision`: collision cost on the mannequin (seed 000's voxel trade-off).
+"""Collision cost on the mannequin against the voxel size (`python -m taichi_cloth bench collision`).
+
+Seed 000's voxel trade-off.
 
 For n x n cloths (1.2 m square, silk) dropped over the mannequin with the implicit integrator, after a
 settling period the benchmark records K consecutive steps (start and end positions, velocities) and
@@ -24,12 +26,14 @@ def add_arguments(p) -> None:
     p.add_argument("--steps", type=int, default=12, help="recorded steps replayed per configuration")
     p.add_argument("--settle", type=float, default=0.6, help="simulated seconds before recording [s]")
     p.add_argument("--cells", type=float, nargs="+", default=list(CELL_FACTORS), help="cell sizes / mean edge")
+    p.add_argument("--arch", default="cpu", choices=("cpu", "gpu"))
+    p.add_argument("--out", default="out/bench", help="folder for collision.md, collision.csv, collision.png")
 
 
 def _record(n: int, settle: float, steps: int):
-    from .colliders import body_mesh
-    from .scene import Scene
-    from .builder import ClothBuilder
+    from ..colliders import body_mesh
+    from ..scene import Scene
+    from ..builder import ClothBuilder
 
     v, t = body_mesh("mannequin")
     cloth = ClothBuilder.grid((1.2, 1.2), (n, n), "silk", center=(0.0, 1.73, 0.06), plane="xz")
@@ -80,7 +84,7 @@ def _replay(collider, scene, frames) -> tuple[float, dict]:
 def run(args) -> int:
     from collision import MeshCollider
 
-    from . import runtime
+    from .. import runtime
 
     runtime.init(args.arch)
     out = Path(args.out)
@@ -91,7 +95,7 @@ def run(args) -> int:
         scene, (v, t), frames = _record(n, args.settle, args.steps)
         print(f"{n}x{n}: recorded {len(frames)} steps after {args.settle} s ({time.perf_counter() - t0:.0f} s)", flush=True)
         implicit_ms = _time_integrator(scene, 4)
-        from .integrators import ApproxImplicit
+        from ..integrators import ApproxImplicit
 
         approx = ApproxImplicit(scene.model, scene.state, scene.forces)
         approx.step(scene.dt)

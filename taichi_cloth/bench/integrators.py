@@ -1,5 +1,7 @@
-"""`python -m taichi_cloth bench`: ms per step of every integrator on square grids, compile time, and wall
-time per simulated second of a hanging cloth at each integrator's largest stable step.
+"""ms per step and real-time factor of every integrator (`python -m taichi_cloth bench [integrators]`).
+
+On square grids: ms per step, compile time, and wall time per simulated second of a hanging cloth at each
+integrator's largest stable step.
 
 "Largest stable step": 0.9 x the linear-theory bound for the explicit family (ALGORITHMS.md 1.4);
 1/60 s (one step per displayed frame) for the unconditionally stable ones. Times are wall clock after a
@@ -15,7 +17,7 @@ from pathlib import Path
 FRAME_DT = 1.0 / 60.0
 
 
-def add_bench_arguments(p) -> None:
+def add_arguments(p) -> None:
     p.add_argument("--sizes", type=int, nargs="+", default=[32, 64, 128, 256], help="grid sizes n (n x n particles)")
     p.add_argument("--integrators", nargs="+", default=None, help="integrators to time (default: all five)")
     p.add_argument("--steps", type=int, default=20, help="steps per timed block (5 blocks, median reported)")
@@ -27,8 +29,8 @@ def add_bench_arguments(p) -> None:
 def hanging_cloth(n: int, integrator: str, material: str = "cotton", dt: float | None = None, **options):
     """The benchmark scene: a 1 m square sheet of n x n particles pinned at its two top corners. dt [s] defaults
     to 1/60 s for the unconditionally stable integrators and 0.9 x the stable bound for the explicit ones."""
-    from .builder import ClothBuilder
-    from .scene import Scene
+    from ..builder import ClothBuilder
+    from ..scene import Scene
 
     cloth = ClothBuilder.grid((1.0, 1.0), (n, n), material, center=(0.0, 1.0, 0.0), plane="xy")
     top = [n * (n - 1), n * n - 1]
@@ -46,7 +48,7 @@ def time_scene(scene, steps: int, blocks: int = 5) -> dict:
 
     import taichi as ti
 
-    from .errors import BlowUpError
+    from ..errors import BlowUpError
 
     t0 = time.perf_counter()
     scene._advance(1)
@@ -74,7 +76,7 @@ def time_scene(scene, steps: int, blocks: int = 5) -> dict:
 
 def time_recorder(scene, out: Path, frames: int = 10) -> float:
     """ms per recorded frame (positions + normals + scalars) for this scene's cloth."""
-    from .recorder import Recorder
+    from ..recorder import Recorder
 
     with Recorder(out / "recorder_timing.rrd") as rec:
         rec.begin_cloth("cloth", scene)
@@ -88,9 +90,9 @@ def time_recorder(scene, out: Path, frames: int = 10) -> float:
     return ms
 
 
-def run_bench(args) -> int:
-    from . import runtime
-    from .integrators import INTEGRATORS
+def run(args) -> int:
+    from .. import runtime
+    from ..integrators import INTEGRATORS
 
     runtime.init(args.arch)
     names = args.integrators or list(INTEGRATORS)
