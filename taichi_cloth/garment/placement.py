@@ -85,6 +85,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from collision.distance import candidates, pairs_by_cell, point_key, unsigned_distance
 from collision.errors import MeshError
 from collision.meshes import connected_components, validate_triangle_mesh
 
@@ -555,7 +556,7 @@ class Body:
         """(n,) float64 [m]: distance of points (n,3) to the body surface, negative inside; exact up to
         max_distance, clipped to +-max_distance beyond. Inside/outside by ray parity (majority of 3 rays)."""
         p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-        d = _unsigned_distance(p, self.vertices[self.triangles], float(max_distance))
+        d = unsigned_distance(p, self.vertices[self.triangles], float(max_distance))
         return np.where(_inside(p, self.vertices, self.triangles), -d, d)
 
 
@@ -578,78 +579,6 @@ def _ray_hits(origin, direction, tri: np.ndarray) -> np.ndarray:
     return t[hit]
 
 
-def _pairs_by_cell(lo: np.ndarray, hi: np.ndarray, cell: float):
-    """(item ids, cell keys) of every integer cell each box [lo, hi] (k,D) touches; keys as int64."""
-    a = np.floor(lo / cell).astype(np.int64)
-    b = np.floor(hi / cell).astype(np.int64)
-    n = b - a + 1
-    count = np.prod(n, axis=1)
-    item = np.repeat(np.arange(len(lo)), count)
-    local = np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)
-    key = np.zeros(len(item), dtype=np.int64)
-    for dim in range(lo.shape[1]):
-        nd = n[item, dim]
-        idx = a[item, dim] + local % nd
-        local = local // nd
-        key = key * 1_000_003 + idx
-    return item, key
-
-
-def _candidates(point_keys: np.ndarray, item: np.ndarray, key: np.ndarray):
-    """(point index, item id) pairs where the point's cell key matches the item's."""
-    order = np.argsort(key, kind="stable")
-    key, item = key[order], item[order]
-    start = np.searchsorted(key, point_keys, side="left")
-    stop = np.searchsorted(key, point_keys, side="right")
-    count = stop - start
-    pi = np.repeat(np.arange(len(point_keys)), count)
-    offs = np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)
-    return pi, item[np.repeat(start, count) + offs]
-
-
-def _point_key(p: np.ndarray, cell: float) -> np.ndarray:
-    idx = np.floor(p / cell).astype(np.int64)
-    key = np.zeros(len(p), dtype=np.int64)
-    for dim in range(p.shape[1]):
-        key = key * 1_000_003 + idx[:, dim]
-    return key
-
-
-def _segment_distance(p, a, b):
-    ab = b - a
-    t = np.clip(np.einsum("ij,ij->i", p - a, ab) / np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-30), 0, 1)
-    return np.linalg.norm(p - a - t[:, None] * ab, axis=1)
-
-
-def _point_triangle_distance(p, a, b, c):
-    """Distances (k,) between points p (k,3) and triangles (a, b, c) (k,3) each."""
-    n = np.cross(b - a, c - a)
-    nn = np.maximum(np.einsum("ij,ij->i", n, n), 1e-30)
-    h = np.einsum("ij,ij->i", p - a, n) / nn
-    q = p - h[:, None] * n
-    inside = np.ones(len(p), dtype=bool)
-    for u, w in ((a, b), (b, c), (c, a)):
-        inside &= np.einsum("ij,ij->i", np.cross(w - u, q - u), n) >= 0
-    d = np.where(inside, np.abs(h) * np.sqrt(nn), np.inf)
-    for u, w in ((a, b), (b, c), (c, a)):
-        d = np.minimum(d, _segment_distance(p, u, w))
-    return d
-
-
-def _unsigned_distance(p: np.ndarray, tri: np.ndarray, cutoff: float) -> np.ndarray:
-    cell = max(cutoff, 0.005)
-    item, key = _pairs_by_cell(tri.min(axis=1) - cutoff, tri.max(axis=1) + cutoff, cell)
-    out = np.full(len(p), cutoff)
-    for start in range(0, len(p), 500):
-        chunk = p[start:start + 500]
-        pi, ti = _candidates(_point_key(chunk, cell), item, key)
-        if len(pi) == 0:
-            continue
-        d = _point_triangle_distance(chunk[pi], tri[ti, 0], tri[ti, 1], tri[ti, 2])
-        np.minimum.at(out[start:start + 500], pi, d)
-    return out
-
-
 def _inside(p: np.ndarray, v: np.ndarray, t: np.ndarray) -> np.ndarray:
     """Ray parity along three slightly tilted, nearly vertical directions; the majority decides."""
     votes = np.zeros(len(p), dtype=int)
@@ -661,9 +590,9 @@ def _inside(p: np.ndarray, v: np.ndarray, t: np.ndarray) -> np.ndarray:
         v2 = np.stack([v @ e1, v @ e2], axis=1)
         tri2 = v2[t]
         cell = 0.01
-        item, key = _pairs_by_cell(tri2.min(axis=1), tri2.max(axis=1), cell)
+        item, key = pairs_by_cell(tri2.min(axis=1), tri2.max(axis=1), cell)
         p2 = np.stack([p @ e1, p @ e2], axis=1)
-        pi, ti = _candidates(_point_key(p2, cell), item, key)
+        pi, ti = candidates(point_key(p2, cell), item, key)
         a, b, c = tri2[ti, 0], tri2[ti, 1], tri2[ti, 2]
         x = p2[pi]
 
