@@ -185,6 +185,27 @@ class Recorder:
         """Extra points (e.g. markers), static by default."""
         self.stream.log(entity, rr.Points3D(np.asarray(points, np.float32), radii=radius, colors=color), static=static)
 
+    # ------------------------------------------------------------------ studies (benchmark results)
+    def log_document(self, entity: str, markdown: str) -> None:
+        """A markdown text (e.g. a benchmark's report), static."""
+        self.stream.log(entity, rr.TextDocument(markdown, media_type=rr.MediaType.MARKDOWN), static=True)
+
+    def log_image_file(self, entity: str, path) -> None:
+        """An image file (e.g. a benchmark's PNG plot), static."""
+        self.stream.log(entity, rr.EncodedImage(path=Path(path)), static=True)
+
+    def log_samples(self, entity: str, times, positions, triangles, translation=(0.0, 0.0, 0.0)) -> None:
+        """A cloth sampled at simulated `times` (S,) [s]: `positions` (S,P,3) [m] on the sim_time timeline, its
+        (T,3) `triangles` once, the whole displaced by `translation` [m]. NaN samples (after a blow-up) are skipped."""
+        rec = self.stream
+        rec.log(entity, rr.Transform3D(translation=np.asarray(translation, np.float32)), static=True)
+        rec.log(f"{entity}/mesh", rr.Mesh3D.from_fields(triangle_indices=np.asarray(triangles, np.uint32),
+                                                        albedo_factor=CLOTH_COLOR), static=True)
+        for t, x in zip(times, positions):
+            if np.isfinite(x).all():
+                rec.set_time("sim_time", duration=float(t))
+                rec.log(f"{entity}/mesh", rr.Mesh3D.from_fields(vertex_positions=np.asarray(x, np.float32)))
+
     # ------------------------------------------------------------------ lifetime
     def flush(self) -> None:
         self.stream.flush()
