@@ -99,7 +99,7 @@ def run_sampled(scene, times, warm_up: bool = True, progress=None) -> Trajectory
                 traj.max_strain = max(traj.max_strain, m.max_strain)
                 if progress is not None:
                     progress(scene.state.t)
-            traj.wall = time.perf_counter() - t0
+            traj.wall += time.perf_counter() - t0
             reached[k] = scene.state.t
             positions[k] = scene.positions()
             energy[k] = scene.measure().total
