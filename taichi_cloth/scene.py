@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .adaptive import AdaptiveOptions, AdaptiveStep
 from .builder import ClothData
 from .colliders import build_colliders
 from .contacts import Contacts
@@ -54,6 +55,10 @@ class RunSummary:
     stats: dict = field(default_factory=dict)
     blowup: str | None = None
     levels: list = field(default_factory=list)  # LevelSwitch history of a multilevel cloth
+    dt_min: float | None = None  # smallest and largest step [s] taken (they differ with dt = "auto" or levels)
+    dt_max: float | None = None
+    timed_sim: float = 0.0       # simulated seconds inside wall_step
+    adaptive: str | None = None  # dt = "auto": the rule and what it did (AdaptiveStep.describe)
     events: list[str] = field(default_factory=list)  # what happened on the way (seams closed and joined, ...)
     outputs: list[str] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
@@ -65,12 +70,16 @@ class RunSummary:
     @property
     def realtime_factor(self) -> float:
         """Simulated seconds per wall second of stepping (> 1 is faster than real time)."""
-        return self.timed_steps * self.dt / self.wall_step if self.wall_step > 0 else float("nan")
+        return self.timed_sim / self.wall_step if self.wall_step > 0 else float("nan")
 
     def format(self) -> str:
         lines = [f"scene {self.name!r}: {self.n_particles} particles, {self.n_springs} springs, "
-                 f"integrator {self.integrator}, dt = {self.dt:.3g} s",
+                 f"integrator {self.integrator}, dt = {'auto' if self.adaptive else f'{self.dt:.3g} s'}",
                  f"  ran {self.frames} frames, {self.steps} steps, {self.sim_time:.3f} s simulated"]
+        if self.adaptive is not None:
+            lines.append(f"  {self.adaptive}")
+        elif self.dt_min is not None and self.dt_max > self.dt_min * (1 + 1e-9):
+            lines.append(f"  steps: dt {self.dt_min:.3g} .. {self.dt_max:.3g} s")
         if self.wall_step > 0:
             lines.append(f"  speed: {self.steps_per_s:,.0f} steps/s, {1e3 * self.wall_step / max(self.timed_steps, 1):.3f} "
                          f"ms/step, {self.realtime_factor:.2f}x real time (frames 2..; frame 1 with compiles took "
@@ -105,7 +114,12 @@ class Scene:
                         the scene then starts on its start level and refines as the drape settles, or a
                         GarmentCloth (taichi_cloth.garment): the scene sews its seams, joins them and drapes on
     integrator:         "explicit" | "verlet" | "central-difference" | "approx-implicit" | "implicit"
-    dt:                 time step [s]
+    dt:                 time step [s], or "auto": chosen before every frame from the integrator's stable step
+                        (taichi_cloth.adaptive: safety x the damped closed-form bound at the Gershgorin frequency,
+                        halved on fast motion near colliders, frame-aligned, recomputed when the model changes;
+                        one step per frame for approx-implicit/implicit); `scene.dt` reads the current step
+    adaptive:           with dt = "auto": AdaptiveOptions keyword arguments (safety, dt_min, dt_max, growth,
+                        calm_steps, motion, rollback)
     integrator_options: dict of the integrator's OPTIONS
     gravity:            [m/s^2]; air_damping: drag rate [1/s]
     pins:               PinSpec list (fixed pins cost nothing per step; moving ones build a PinDriver)
@@ -128,14 +142,28 @@ class Scene:
     """
 
     def __init__(self, cloth: ClothData | Model | MultilevelCloth, *, name: str = "cloth", integrator: str = "approx-implicit",
-                 dt: float = 1.0 / 240.0, integrator_options: dict | None = None, gravity=(0.0, -9.81, 0.0),
+                 dt: float | str = 1.0 / 240.0, integrator_options: dict | None = None, gravity=(0.0, -9.81, 0.0),
                  air_damping: float = 0.1, pins=(), wind: dict | None = None, stretch_limit: dict | None = None,
                  colliders=(), self_collision=False, multilevel: dict | None = None, sewing: dict | None = None,
-                 body_morph: dict | None = None, fps: float = 60.0,
+                 body_morph: dict | None = None, fps: float = 60.0, adaptive: dict | None = None,
                  precision: str = "f32", step_guard: str = "warn", max_speed: float = 200.0, max_strain: float = 10.0,
                  base_dir=None):
-        if not dt > 0 or not math.isfinite(dt):
-            raise SceneError(f"dt must be a positive number of seconds, got {dt}")
+        auto = isinstance(dt, str)
+        if auto and dt != "auto":
+            raise SceneError(f"dt must be a positive number of seconds or 'auto', got {dt!r}")
+        number = isinstance(dt, (int, float)) and not isinstance(dt, bool)
+        if not auto and not (number and dt > 0 and math.isfinite(dt)):
+            raise SceneError(f"dt must be a positive number of seconds or 'auto', got {dt!r}")
+        if adaptive is not None and not auto:
+            raise SceneError(f"adaptive options need dt = 'auto' (got dt = {dt!r})")
+        try:
+            adaptive_options = AdaptiveOptions(**(adaptive or {})) if auto else None
+        except TypeError:
+            unknown = sorted(set(adaptive) - set(AdaptiveOptions.keys()))
+            raise SceneError(f"adaptive has no option {unknown[0]!r} "
+                             f"(options: {', '.join(AdaptiveOptions.keys())})") from None
+        except ValueError as err:
+            raise SceneError(str(err)) from None
         if not fps > 0:
             raise SceneError(f"fps must be > 0, got {fps}")
         if step_guard not in STEP_GUARDS:
@@ -161,7 +189,8 @@ class Scene:
         else:
             self.model = cloth if isinstance(cloth, Model) else Model(cloth, precision)
         self.state = State(self.model)
-        self.dt = float(dt)
+        self.adaptive: AdaptiveStep | None = None
+        self._dt = None if auto else float(dt)
         self.fps = float(fps)
         self.max_speed, self.max_strain = float(max_speed), float(max_strain)
         self.warnings: list[str] = []
@@ -203,6 +232,11 @@ class Scene:
                                  "([multilevel] in a scene file, ClothBuilder.multilevel_grid in Python)")
             self.integrator.attach_levels(ml.hierarchy.levels, ml.levels, [self._pinned_on(d) for d in ml.levels],
                                           ml.start_level)
+        if auto:  # before anything reads dt (body morph, refiner)
+            try:
+                self.adaptive = AdaptiveStep(self, adaptive_options)
+            except ValueError as err:
+                raise SceneError(str(err)) from None
         self.stretch_limit = StretchLimit(self.model, self.state, **stretch_limit) if stretch_limit else None
         self.sewing = None
         if self.garment is not None:
@@ -314,15 +348,31 @@ class Scene:
         unconditionally stable). The step limit shrinks by about 1/sqrt(2) per 4-8 level."""
         return stable_dt(type(self.integrator), self.model, self.forces.air_damping_value)
 
+    @property
+    def dt(self) -> float:
+        """The time step [s] of the next step. With dt = "auto" it is the current automatic choice, and assigning
+        it only re-plans it (the refiner assigns it after a level switch)."""
+        return self._dt
+
+    @dt.setter
+    def dt(self, value: float) -> None:
+        # with dt = "auto" the step is managed: a write (the refiner's, after a level switch) re-plans it
+        if self.adaptive is not None:
+            self.adaptive.plan()
+        else:
+            self._dt = float(value)
+
     def _level_steps(self):
         """(label, dt [s], stable dt [s] or None) for every level this scene may run on."""
+        auto = self.adaptive
         if self.multilevel_cloth is None:
-            return [("", self.dt, self.stable_dt)]
+            bound = self.stable_dt
+            return [("", auto.step_for(bound) if auto else self.dt, bound)]
         out = []
         for k, data in enumerate(self.multilevel_cloth.levels):
             bound = stable_dt(type(self.integrator), self.model, self.forces.air_damping_value,
                               omega=omega_max_bound(data, self._pinned_on(data)))
-            out.append((f" on level {k + 1}", self.refiner.level_dt(k), bound))
+            out.append((f" on level {k + 1}", auto.step_for(bound) if auto else self.refiner.level_dt(k), bound))
         return out
 
     def _check_step(self, guard: str) -> None:
@@ -341,16 +391,21 @@ class Scene:
 
     @property
     def substeps(self) -> int:
-        """Steps per frame: round(1 / (fps dt)), at least 1."""
+        """Steps per frame: round(1 / (fps dt)), at least 1 (with dt = "auto", dt = 1 / (fps substeps) exactly)."""
         return max(1, round(1.0 / (self.fps * self.dt)))
 
     # ------------------------------------------------------------------ stepping
     def step(self, n: int = 1) -> Measurement:
         """Advance n steps, then measure and check for a blow-up (raises BlowUpError). Returns the measurement."""
         self._advance(n)
-        return self.check()
+        m = self.check()
+        if self.adaptive is not None:
+            self.adaptive.observe(m.max_speed, n)
+        return m
 
     def _advance(self, n: int) -> None:
+        if self.adaptive is not None:
+            self.adaptive.plan()  # cheap unless the model changed
         dt = self.dt
         colliders = self.colliders
         morph = self.body_morph
@@ -434,6 +489,8 @@ class Scene:
             self.sewing.reset()
         if self.pins is not None:
             self.pins.apply(0.0, None)
+        if self.adaptive is not None:
+            self.adaptive.reset()
 
     @property
     def topology_changes(self) -> bool:
@@ -507,29 +564,52 @@ class Scene:
             from tqdm import tqdm
 
             bar = tqdm(total=frames, unit="frame", desc=self.name, leave=False)
-        n = self.substeps
+        auto = self.adaptive
+        counters = auto.counters() if auto is not None else None
         if self.sewing is not None and self.sewing.active:
             self.sewing.start_clock()
         try:
             for frame in range(1, frames + 1):
                 t0 = time.perf_counter()
-                self._advance(n)
                 try:
-                    m = self.check()  # also syncs: the measurement reads the device
+                    while True:
+                        # per frame: a level switch or dt = "auto" changes the step, and frames stay 1/fps long
+                        if auto is not None:
+                            auto.plan()
+                            auto.save()
+                        n, dt, sim0 = self.substeps, self.dt, self.state.t
+                        self._advance(n)
+                        try:
+                            m = self.check()  # also syncs: the measurement reads the device
+                            break
+                        except BlowUpError as err:
+                            if auto is None or not auto.roll_back():
+                                raise
+                            summary.events.append(f"frame {frame}: {err.reason} at dt = {dt:.3g} s; rolled back, "
+                                                  f"dt halved to {0.5 * dt:.3g} s")
+                            if recorder is not None:
+                                recorder.log_event(entity, self, frame, summary.events[-1], level="WARN")
                 except BlowUpError as err:
                     summary.frames, summary.steps, summary.sim_time = frame, summary.steps + n, self.state.t
                     summary.blowup = str(err)
+                    summary.dt_min = min(summary.dt_min or dt, dt)
+                    summary.dt_max = max(summary.dt_max or dt, dt)
                     err.summary = summary
                     if recorder is not None:
                         recorder.log_event(entity, self, frame, str(err))
                     raise
                 elapsed = time.perf_counter() - t0
                 summary.frames, summary.steps, summary.sim_time = frame, summary.steps + n, self.state.t
+                summary.dt_min = min(summary.dt_min or dt, dt)
+                summary.dt_max = max(summary.dt_max or dt, dt)
+                if auto is not None:
+                    auto.observe(m.max_speed, n)
                 if frame == 1 and frames > 1:
                     summary.first_frame_wall = elapsed  # compiles; kept out of the speed figures
                 else:
                     summary.wall_step += elapsed
                     summary.timed_steps += n
+                    summary.timed_sim += self.state.t - sim0
                 summary.final = m
                 summary.max_strain_seen = max(summary.max_strain_seen, m.max_strain)
                 if self.refiner is not None and self.refiner.observe(m):
@@ -568,11 +648,13 @@ class Scene:
                 summary.levels = list(self.refiner.switches)
             if self.topology_changes:
                 summary.n_particles, summary.n_springs = self.model.data.n_particles, self.model.data.n_springs
-            if self.sewing is not None:
+            if self.sewing is not None or auto is not None:  # both may warn during the run
                 summary.warnings = list(self.warnings)
             if summary.steps:
                 summary.stats = {f"{k} per step": (v - stats_start.get(k, 0)) / summary.steps
                                  for k, v in self._stats().items()}
+            if auto is not None:
+                summary.adaptive = auto.describe(summary.dt_min, summary.dt_max, counters)
             if recorder is not None:
                 recorder.flush()
         return summary

@@ -79,7 +79,7 @@ def test_overrides_replace_integrator_and_step(tmp_path):
 @pytest.mark.parametrize("edit,expected", [
     (("frames = 3", "frames = 3\nframse = 4"), "unknown key 'framse' (did you mean 'frames'?)"),
     (("size = [0.5, 0.5]", "size = [0.5, 0.5]\nsise = 1"), "[cloth.grid]: unknown key 'sise'"),
-    (('dt = 0.005', 'dt = "fast"'), "[integrator] dt: must be a number, got 'fast'"),
+    (('dt = 0.005', 'dt = "fast"'), "[integrator] dt: must be a number of seconds or \"auto\", got 'fast'"),
     (('dt = 0.005', 'dt = -0.001'), "[integrator] dt: must be > 0, got -0.001"),
     (('dt = 0.005', ''), "[integrator]: missing required key 'dt'"),
     (('name = "approx-implicit"', 'name = "rk4"'), "[integrator] name: 'rk4' is not one of: explicit"),
