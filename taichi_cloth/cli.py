@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 from .errors import BlowUpError, MeshError, PatternError, SceneError
+from .quality import QUALITIES
 
 EXIT_BAD_INPUT = 2
 EXIT_BLOWUP = 3
@@ -17,10 +18,22 @@ def add_run_arguments(p: argparse.ArgumentParser, frames_default=None) -> None:
     p.add_argument("--out", help="output folder (default: the scene's [output] dir, usually out/)")
     p.add_argument("--frames", type=int, default=frames_default, help="frames to run (default: the scene's)")
     p.add_argument("--integrator", help="explicit | verlet | central-difference | approx-implicit | implicit")
-    p.add_argument("--dt", type=float, help="time step [s]")
+    p.add_argument("--dt", type=_step, help='time step [s], or "auto" (chosen from the stable step every frame)')
     p.add_argument("--arch", default="cpu", choices=("cpu", "gpu"), help="Taichi arch (default cpu)")
     p.add_argument("--precision", choices=("f32", "f64"), help="field precision (default: the scene's)")
+    p.add_argument("--quality", choices=QUALITIES, help="a measured preset (integrator, step, level) from `bench "
+                   "tradeoff`: preview | balanced | accurate; --integrator and --dt still override it")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def _step(text: str):
+    """--dt: a number of seconds or "auto"."""
+    if text == "auto":
+        return text
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'must be a number of seconds or "auto", got {text!r}') from None
 
 
 def run_scene_file(scene_path, args, recorder=None, entity=None, translation=None, quiet=False):
@@ -37,8 +50,11 @@ def run_scene_file(scene_path, args, recorder=None, entity=None, translation=Non
     parse_scene(scene_path)  # bad files fail here, before Taichi starts
     runtime.init(args.arch)
     loaded = load_scene(scene_path, frames=args.frames, integrator=args.integrator, dt=args.dt,
-                        precision=getattr(args, "precision", None), out=args.out)
+                        precision=getattr(args, "precision", None), out=args.out,
+                        quality=getattr(args, "quality", None))
     scene, out = loaded.scene, Path(loaded.output["dir"])
+    if loaded.config.get("_quality") is not None and not quiet:
+        print(loaded.config["_quality"].describe())
     own = recorder is None and loaded.output["record"]
     rec = Recorder(out / f"{loaded.name}.rrd", recording_name=loaded.name) if own else recorder
     summary = None
@@ -148,7 +164,7 @@ def _cmd_info(args) -> int:
 
 
 #: `bench SUITE`: modules of taichi_cloth.bench, each with add_arguments(parser) and run(args) -> exit code
-SUITES = ("integrators", "collision")
+SUITES = ("integrators", "collision", "tradeoff", "stability")
 
 
 def main(argv=None) -> int:

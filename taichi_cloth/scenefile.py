@@ -10,6 +10,9 @@ and a component whose table is absent is never built. The schema (units in brack
     gravity = [0.0, -9.81, 0.0]   # [m/s^2]
     air_damping = 0.1             # drag rate [1/s]
     self_collision = false        # the cloth against its own triangles (costs a grid rebuild per step)
+    quality = "balanced"          # preview | balanced | accurate: a measured preset (taichi_cloth.quality) picks the
+                                  # integrator, its options, dt and the 4-8 level; replaces [integrator] name, dt
+                                  # and options (step_guard stays); the CLI's --integrator and --dt still override
 
     [cloth]                       # exactly one source: [cloth.grid], [cloth.mesh] or garment = "file.toml"
     material = "cotton"           # preset name, or a [cloth.material] table
@@ -23,7 +26,9 @@ and a component whose table is absent is never built. The schema (units in brack
 
     [integrator]
     name = "approx-implicit"      # explicit | verlet | central-difference | approx-implicit | implicit
-    dt = 0.004                    # [s]
+    dt = 0.004                    # [s], or "auto": chosen per frame from the stable step (taichi_cloth.adaptive)
+    # adaptive = { safety = 0.8, dt_min = 1e-6, dt_max = 0.0167, growth = 1.25, calm_steps = 50, motion = 0.5,
+    #              rollback = true }   # with dt = "auto" only; dt_max defaults to one frame
     step_guard = "warn"           # warn | refuse | off, when an explicit dt exceeds its stable bound
     # plus the integrator's own options, e.g. sweeps = 2, warm_start = false, jv_term = false (approx-implicit),
     # cg_tolerance = 1e-3, cg_max_iterations = 200 (implicit)
@@ -77,6 +82,7 @@ from .builder import ClothBuilder
 from .errors import MeshError, PatternError, SceneError
 from .integrators import INTEGRATORS
 from .material import MATERIALS, Material, material as preset
+from .quality import QUALITIES
 from .scene import STEP_GUARDS, Scene
 
 _MISSING = object()
@@ -150,7 +156,17 @@ _KINDS: dict[str, tuple[Callable[[Any], bool], str]] = {
     "point": (lambda v: isinstance(v, str) or _is_int(v) or _vector(2)(v), "a corner name or index, or [u, v]"),
     "names": (lambda v: isinstance(v, dict) and all(_is_int(i) for i in v.values()),
               "a table of corner name = index"),
+    "dt": (lambda v: v == "auto" or _is_number(v), 'a number of seconds or "auto"'),
 }
+
+#: [integrator] dt: seconds, or "auto" (taichi_cloth.adaptive); [integrator] adaptive: the rule's parameters
+#: (defaults in AdaptiveOptions, so absent keys stay None here and are dropped)
+DT_FIELD = Field("dt", check=lambda v: None if v == "auto" or v > 0 else "must be > 0")
+ADAPTIVE_TABLE = Table({"safety": Field("number", None, lambda v: None if 0 < v <= 1 else "must lie in (0, 1]"),
+                        "dt_min": Field("number", None, _positive), "dt_max": Field("number", None, _positive),
+                        "growth": Field("number", None, lambda v: None if v > 1 else "must be > 1"),
+                        "calm_steps": Field("int", None, _at_least(1)), "motion": Field("number", None, _positive),
+                        "rollback": Field("bool", None)})
 
 MATERIAL_TABLE = Table({"preset": Field("str", None, choices=tuple(MATERIALS)),
                         "density": Field("number", None, _positive), "stretch": Field("number", None, _nonneg),
@@ -166,6 +182,7 @@ SCHEMA = Table({
     "gravity": Field("vec3", [0.0, -9.81, 0.0]),
     "air_damping": Field("number", 0.1, _nonneg),
     "self_collision": Field("bool", False),
+    "quality": Field("str", None, choices=QUALITIES),
     "cloth": Table({
         "material": MATERIAL_TABLE,
         "grid": Table({"size": Field("vec2", check=lambda v: None if min(v) > 0 else "must be positive"),
@@ -177,7 +194,7 @@ SCHEMA = Table({
         "garment": Field("str", None),
     }, required=True),
     "integrator": Table({"name": Field("str", choices=tuple(INTEGRATORS)),
-                         "dt": Field("number", check=_positive),
+                         "dt": DT_FIELD, "adaptive": ADAPTIVE_TABLE,
                          "step_guard": Field("str", "warn", choices=STEP_GUARDS)}, required=True, extra=True),
     "pins": Array(Table({"indices": Field("ints", []), "near": Field("points", []),
                          "box": Table({"min": Field("vec3"), "max": Field("vec3")}),
@@ -399,7 +416,9 @@ def _check_collider(v: "_Validator", col: dict, where: str) -> None:
 
 def _check_integrator_options(v: _Validator, integ: dict) -> None:
     cls = INTEGRATORS[integ["name"]]
-    for key in [k for k in integ if k not in ("name", "dt", "step_guard")]:
+    if integ.get("adaptive") is not None and integ["dt"] != "auto":
+        v.fail("[integrator] adaptive", f'needs dt = "auto" (dt is {integ["dt"]!r})')
+    for key in [k for k in integ if k not in ("name", "dt", "step_guard", "adaptive")]:
         opt = cls.OPTIONS.get(key)
         where = f"[integrator] {key}"
         if opt is None:
@@ -451,11 +470,13 @@ def build_scene(cfg: dict) -> Scene:
         raise SceneError(f"{label}: [cloth] garment: {exc}") from None
     integ = dict(cfg["integrator"])
     name, dt, guard = integ.pop("name"), integ.pop("dt"), integ.pop("step_guard")
+    adaptive = {k: val for k, val in (integ.pop("adaptive", None) or {}).items() if val is not None}
     pins = [dict(indices=p["indices"], near=p["near"],
                  box=(p["box"]["min"], p["box"]["max"]) if p.get("box") else None, path=p["keyframes"])
             for p in cfg["pins"]]
     try:
         return Scene(data, name=cfg["name"], integrator=name, dt=dt, integrator_options=integ,
+                     adaptive=adaptive if dt == "auto" else None,
                      gravity=cfg["gravity"], air_damping=cfg["air_damping"], pins=pins, wind=cfg.get("wind"),
                      stretch_limit=cfg.get("stretch_limit"), colliders=colliders, body_morph=body_morph,
                      self_collision=cfg["self_collision"], fps=cfg["fps"], multilevel=_schedule(cfg.get("multilevel")),
@@ -503,23 +524,52 @@ def _schedule(ml: dict | None) -> dict | None:
     return dict(ml["settle"], refine=ml["refine"], dt_growth=ml["dt_growth"], angle=ml["angle"])
 
 
+def _apply_quality(cfg: dict) -> None:
+    """Replace the config's integrator (name, options, dt) by its quality preset's and move the cloth to the
+    preset's 4-8 level: fewer [multilevel] levels, or a coarser [cloth.grid] resolution (a mesh or garment
+    cloth keeps its mesh). The chosen preset is kept as cfg["_quality"] (the CLI prints it)."""
+    from .quality import coarsen_resolution, preset
+
+    p = preset(cfg["quality"])
+    cfg["integrator"] = {"name": p.integrator, "step_guard": cfg["integrator"]["step_guard"], **p.options,
+                         "dt": p.dt if p.dt is not None else "auto"}
+    if p.dt_bound_fraction is not None:
+        cfg["integrator"]["adaptive"] = {"safety": p.dt_bound_fraction}
+    ml, grid = cfg.get("multilevel"), cfg["cloth"].get("grid")
+    if p.level < 0 and ml is not None:
+        ml["levels"] = max(1, ml["levels"] + p.level)
+        ml["start_level"] = min(ml["start_level"], ml["levels"])
+    elif p.level < 0 and grid is not None:
+        grid["resolution"] = coarsen_resolution(grid["resolution"], p.level)
+    cfg["_quality"] = p
+
+
 def load_scene(source: str | Path | dict, *, frames: int | None = None, integrator: str | None = None,
                dt: float | None = None, precision: str | None = None, out: str | Path | None = None,
-               integrator_options: dict | None = None) -> LoadedScene:
+               integrator_options: dict | None = None, quality: str | None = None) -> LoadedScene:
     """Parse and build a scene; keyword arguments override the file (as the CLI flags do).
 
+    `quality` (preview | balanced | accurate) replaces the file's integrator, options, dt and level by the
+    measured preset (taichi_cloth.quality); `integrator` and `dt` then override the preset's choice.
     Overriding the integrator drops the file's options that the new integrator does not have."""
     cfg = parse_scene(source)
     v = _Validator(cfg["_label"] + " (override)")
+    if quality is not None:
+        cfg["quality"] = v.value(Field("str", choices=QUALITIES), quality, "--quality")
+    if cfg["quality"] is not None:
+        _apply_quality(cfg)
     if integrator is not None:
         v.value(Field("str", choices=tuple(INTEGRATORS)), integrator, "--integrator")
         if integrator != cfg["integrator"]["name"]:
-            cfg["integrator"] = {k: cfg["integrator"][k] for k in ("dt", "step_guard")} | {"name": integrator}
+            cfg["integrator"] = {k: cfg["integrator"][k] for k in ("dt", "step_guard", "adaptive")
+                                 if k in cfg["integrator"]} | {"name": integrator}
     if integrator_options:
         cfg["integrator"].update(integrator_options)
         _check_integrator_options(v, cfg["integrator"])
     if dt is not None:
-        cfg["integrator"]["dt"] = v.value(Field("number", check=_positive), dt, "--dt")
+        cfg["integrator"]["dt"] = v.value(DT_FIELD, dt, "--dt")
+        if dt != "auto":
+            cfg["integrator"].pop("adaptive", None)  # a fixed step replaces the automatic one
     if frames is not None:
         cfg["frames"] = v.value(Field("int", check=_at_least(0)), frames, "--frames")
     if precision is not None:
