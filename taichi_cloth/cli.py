@@ -164,7 +164,7 @@ def _cmd_info(args) -> int:
 
 
 #: `bench SUITE`: modules of taichi_cloth.bench, each with add_arguments(parser) and run(args) -> exit code
-SUITES = ("integrators", "collision", "tradeoff", "stability")
+SUITES = ("integrators", "collision", "tradeoff", "stability", "peers")
 
 
 def main(argv=None) -> int:
