@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from taichi_cloth.bench import tradeoff as tr
-from taichi_cloth.bench.accuracy import pareto_front, surface_distance
+from taichi_cloth.bench.accuracy import Trajectory, compare, pareto_front, surface_distance
 from taichi_cloth.integrators import INTEGRATORS
 from taichi_cloth.quality import load_presets
 
@@ -112,3 +112,15 @@ def test_surface_distance_ignores_sliding_but_not_lifting():
     slid = x.copy()
     slid[7:11, 0] += 0.05  # interior vertices moved within the plane: the surface is the same
     assert surface_distance(x, tri, slid, tri) == pytest.approx((0.0, 0.0), abs=1e-12)
+
+
+def test_energy_growth_is_energy_above_the_start():
+    times = np.array([0.1, 0.2, 0.3])
+    x = np.zeros((3, 4, 3))
+    ref = Trajectory(times, x, np.array([1.0, 0.8, 0.7]), start_energy=1.0)
+    calm = Trajectory(times, x, np.array([0.9, 0.8, 0.6]), start_energy=1.0)
+    rising = Trajectory(times, x, np.array([0.9, 1.3, 1.1]), start_energy=1.0)
+    assert compare(calm, ref, 2.0)["energy_growth"] == 0.0
+    assert compare(rising, ref, 2.0)["energy_growth"] == pytest.approx(0.15)
+    assert compare(rising, ref, 2.0)["energy_drift"] == pytest.approx(0.25)
+    assert tr.ENERGY_GROWTH < 0.15  # such a run would be reported as having gained energy

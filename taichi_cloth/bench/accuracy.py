@@ -30,6 +30,7 @@ class Trajectory:
     sim_time:   float [s]              simulated time reached
     steps:      int                    steps taken
     status:     OK or UNSTABLE; message: the blow-up report when UNSTABLE
+    start_energy: float [J]            total energy at the start (the scene's state when run_sampled began)
     """
 
     times: np.ndarray
@@ -41,6 +42,7 @@ class Trajectory:
     steps: int = 0
     status: str = OK
     message: str = ""
+    start_energy: float = float("nan")
     extra: dict = field(default_factory=dict)
 
     @property
@@ -56,16 +58,18 @@ class Trajectory:
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
         np.savez_compressed(path, times=self.times, positions=self.positions, energy=self.energy,
-                            scalars=np.array([self.max_strain, self.wall, self.sim_time, self.steps]),
+                            scalars=np.array([self.max_strain, self.wall, self.sim_time, self.steps,
+                                              self.start_energy]),
                             status=np.array(self.status), message=np.array(self.message))
         return path
 
     @classmethod
     def load(cls, path) -> "Trajectory":
         with np.load(path) as z:
-            max_strain, wall, sim_time, steps = z["scalars"]
+            max_strain, wall, sim_time, steps, *rest = z["scalars"]  # files before start_energy have 4
+            start_energy = rest[0] if rest else float("nan")
             return cls(z["times"], z["positions"], z["energy"], float(max_strain), float(wall), float(sim_time),
-                       int(steps), str(z["status"]), str(z["message"]))
+                       int(steps), str(z["status"]), str(z["message"]), float(start_energy))
 
 
 def run_sampled(scene, times, warm_up: bool = True, progress=None) -> Trajectory:
@@ -89,7 +93,7 @@ def run_sampled(scene, times, warm_up: bool = True, progress=None) -> Trajectory
     positions = np.full((len(times), P, 3), np.nan)
     energy = np.full(len(times), np.nan)
     reached = np.full(len(times), np.nan)
-    traj = Trajectory(reached, positions, energy)
+    traj = Trajectory(reached, positions, energy, start_energy=scene.measure().total)
     t0 = time.perf_counter()
     try:
         for k, t in enumerate(times):
@@ -138,12 +142,15 @@ def compare(run: Trajectory, reference: Trajectory, energy_scale: float, window:
     every vertex; final_rms and final_max [m]: the shape at the last sample, as the symmetric surface distance
     when `triangles` = (the run's, the reference's) (T,3) arrays are given, else the vertex distance;
     energy_drift: max over all samples of |E - E_ref|, divided by `energy_scale` [J] (e.g. the cloth's weight
-    times its size); max_strain [-] (the run's peak) and wall_per_sim_s. NaN errors for an unstable run."""
+    times its size); energy_growth: how far the total energy rose above its start, max(0, max E - E_start), in the
+    same unit (a passive cloth started at rest only loses energy: a growth is energy the scheme or a constraint
+    put in); max_strain [-] (the run's peak) and wall_per_sim_s. NaN errors for an unstable run."""
     P = run.positions.shape[1]
     d = np.linalg.norm(run.positions - reference.positions[:, :P], axis=2)
     out = {"wall_per_sim_s": run.wall_per_sim_s, "max_strain": run.max_strain, "stable": run.stable}
     if not run.stable or not np.isfinite(d).all():
-        return out | {k: float("nan") for k in ("rms_error", "max_error", "final_rms", "final_max", "energy_drift")}
+        return out | {k: float("nan") for k in ("rms_error", "max_error", "final_rms", "final_max", "energy_drift",
+                                                "energy_growth")}
     w = d[:window]
     if triangles is not None:
         final = surface_distance(run.positions[-1], triangles[0], reference.positions[-1], triangles[1])
@@ -151,7 +158,8 @@ def compare(run: Trajectory, reference: Trajectory, energy_scale: float, window:
         final = float(np.sqrt(np.mean(d[-1] ** 2))), float(d[-1].max())
     return out | {"rms_error": float(np.sqrt(np.mean(w ** 2))), "max_error": float(w.max()),
                   "final_rms": final[0], "final_max": final[1],
-                  "energy_drift": float(np.max(np.abs(run.energy - reference.energy)) / energy_scale)}
+                  "energy_drift": float(np.max(np.abs(run.energy - reference.energy)) / energy_scale),
+                  "energy_growth": max(0.0, float(np.max(run.energy) - run.start_energy)) / energy_scale}
 
 
 def pareto_front(cost, error) -> np.ndarray:

@@ -8,17 +8,22 @@ The study behind the quality presets. Three standard scenes, each a square sheet
             stretch limit 10 %, as demos/scenes/drape_on_mannequin.toml)
 Reference: the implicit integrator in float64, CG to a relative residual of 1e-6, at `--ref-dt` on the finest
 level; it is run a second time at twice that step, and the distance between the two estimates its own error
-(backward Euler is first order: the error of the step h is about the difference between h and 2h). Errors
-below that floor are not resolved.
+(backward Euler is first order: the error of the step h is about the difference between h and 2h). That
+estimate stays under FLOOR (1 mm) only until the first fold or contact (0.2-0.4 s here): from there on a drape's
+fold pattern depends on perturbations as small as the step's own error, so vertex distances to the reference
+stop measuring accuracy (ours grew from 0.1 mm to 2-4 cm within 0.2 s of contact, and do not shrink with the
+step). The vertex errors are therefore taken over that resolved window only, and the final shape is compared by
+its symmetric surface distance, with the reference's own figure beside it.
 
 Every configuration (integrator variant x step x level) runs the same scene from rest and is sampled at the
 same simulated times (`--samples` times up to `--sim-time`); a coarser level is compared on the vertices it
 shares with the finest (the 4-8 hierarchy is nested). Reported per configuration: wall time per simulated
-second (kernels compiled beforehand), RMS and max vertex distance over the samples, the final shape's RMS and
-max distance, the energy drift (max |E - E_ref| over the samples / (weight x size)), the peak strain, and
-whether it went unstable (and when). The explicit integrators run at fractions of their linear-theory
-stable step on each level (and at frame-sized steps, which they cannot take: recorded as unstable); the
-others at the `--dt` ladder.
+second (kernels compiled beforehand), RMS and max vertex distance over the resolved window, the final shape's RMS
+and max surface distance, the energy drift (max |E - E_ref| over the samples / (weight x size)), the energy
+growth above the start in the same unit, the peak strain, and whether it went unstable (and when) or gained
+energy (more than ENERGY_GROWTH: a cloth released from rest can only lose energy; such a run stays in the table
+but is not on the front). The explicit integrators run at fractions of their linear-theory stable step on each
+level (and at frame-sized steps, which they cannot take: recorded as unstable); the others at the `--dt` ladder.
 
 Output in --out (default out/bench/tradeoff): tradeoff.csv, tradeoff.md, tradeoff.png (RMS error against
 cost, one curve per integrator variant, the Pareto front of each scene marked, plus the front over all
@@ -64,6 +69,10 @@ BOUND_FRACTIONS = (0.9, 0.45)
 REFERENCE = ("implicit", {"cg_tolerance": 1e-6, "cg_max_iterations": 1000})
 #: [m] the vertex errors are taken over the leading samples where the reference's own error stays under this
 FLOOR = 1e-3
+#: a run whose total energy rises more than this (x weight x size) above its start failed: a cloth released from
+#: rest only loses energy (healthy runs measure exactly 0; what rises is energy a coarse CG solve or a contact
+#: projection fighting the solve put in)
+ENERGY_GROWTH = 0.05
 #: the presets: worst RMS error over the scenes [m] each may have (accurate: the most accurate if none meets it)
 PRESET_ERRORS = {"preview": 0.05, "balanced": 0.01, "accurate": 0.001}
 
@@ -149,7 +158,8 @@ class Study:
 
 COLUMNS = [("scene", "{}"), ("variant", "{}"), ("level", "{}"), ("particles", "{}"), ("step", "{}"),
            ("dt", "{:.3g}"), ("wall_per_sim_s", "{:.3g}"), ("rms_error", "{:.3g}"), ("max_error", "{:.3g}"),
-           ("final_rms", "{:.3g}"), ("final_max", "{:.3g}"), ("energy_drift", "{:.3g}"), ("max_strain", "{:.3g}"),
+           ("final_rms", "{:.3g}"), ("final_max", "{:.3g}"), ("energy_drift", "{:.3g}"), ("energy_growth", "{:.3g}"),
+           ("max_strain", "{:.3g}"),
            ("status", "{}"), ("front", "{}")]
 
 
@@ -284,11 +294,14 @@ def run_study(scene_names, variants, levels_below=(0, 1, 2), base: int = 4, n_le
                    **compare(traj, ref.traj, scale, ref.window, (scene.model.data.triangles, ref.triangles)),
                    "status": "ok" if traj.stable else f"unstable at t = {traj.sim_time:.3g} s",
                    "key": cfg.key}
+            if row["stable"] and row["energy_growth"] > ENERGY_GROWTH:
+                row["stable"] = False
+                row["status"] = f"energy grew by {row['energy_growth']:.3g} x weight x size"
             study.rows.append(row)
             if keep_shapes and traj.stable:
                 study.shapes[(name,) + cfg.key] = (traj, scene.model.data.triangles.copy())
         front = pareto_front([r["wall_per_sim_s"] for r in study.rows if r["scene"] == name],
-                             [r["rms_error"] for r in study.rows if r["scene"] == name])
+                             [r["rms_error"] if r["stable"] else math.nan for r in study.rows if r["scene"] == name])
         for r, f in zip([r for r in study.rows if r["scene"] == name], front):
             r["front"] = bool(f)
         log(f"{name}: {len(sweep)} configurations in {time.perf_counter() - t0:.1f} s; "
@@ -391,7 +404,7 @@ def report(study: Study, agg: list[dict], presets: dict) -> str:
                      f"{p['measured']['wall_per_sim_s_all_scenes']:.3g} |")
     front = sorted((r for r in agg if r["front"]), key=lambda r: r["wall_per_sim_s"])
     lines += ["", "## The front over all scenes (worst error, summed cost)", "", markdown_table(front, AGG_COLUMNS),
-              "", "## Unstable configurations", ""]
+              "", "## Unstable configurations (blown up, or energy grew)", ""]
     bad = [r for r in study.rows if not r["stable"]]
     lines += [f"- {r['scene']}: {r['variant']}, level {r['level']}, {r['step']}: {r['status']}" for r in bad] or ["none"]
     lines += ["", "## Every configuration", "", markdown_table(study.rows)]
