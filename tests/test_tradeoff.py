@@ -124,3 +124,12 @@ def test_energy_growth_is_energy_above_the_start():
     assert compare(rising, ref, 2.0)["energy_growth"] == pytest.approx(0.15)
     assert compare(rising, ref, 2.0)["energy_drift"] == pytest.approx(0.25)
     assert tr.ENERGY_GROWTH < 0.15  # such a run would be reported as having gained energy
+
+
+def test_bad_options_get_one_error_line(capsys):
+    from taichi_cloth.cli import main
+
+    assert main(["bench", "tradeoff", "--variants", "rk4"]) == 2
+    assert "error: unknown variant 'rk4'" in capsys.readouterr().out
+    assert main(["bench", "tradeoff", "--sim-time", "0"]) == 2
+    assert capsys.readouterr().out.startswith("error: ")

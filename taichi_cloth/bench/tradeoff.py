@@ -431,12 +431,16 @@ def plot(study: Study, agg: list[dict], presets: dict, path: Path) -> Path | Non
     except ImportError:
         return None
     names = list(study.references)
-    fig, axes = plt.subplots(1, len(names) + 1, figsize=(5.2 * (len(names) + 1), 4.8), squeeze=False)
+    cols = 2 if len(names) >= 2 else len(names) + 1
+    rows_ = math.ceil((len(names) + 1) / cols)
+    fig, axes = plt.subplots(rows_, cols, figsize=(6.2 * cols, 4.6 * rows_), squeeze=False)
+    for ax in axes.flat[len(names) + 1:]:
+        ax.set_visible(False)
     colors = {v: plt.cm.tab10(i % 10) for i, v in enumerate(VARIANTS)}
     markers = ["o", "s", "^", "D", "v"]
     finest = study.settings["n_levels"]
     panels = [(name, [r for r in study.rows if r["scene"] == name]) for name in names] + [("all scenes", agg)]
-    for ax, (title, rows) in zip(axes[0], panels):
+    for ax, (title, rows) in zip(axes.flat, panels):
         for v in VARIANTS:
             for level in sorted({r["level"] for r in rows}, reverse=True):
                 pts = sorted(((r["wall_per_sim_s"], r["rms_error"]) for r in rows
