@@ -61,7 +61,7 @@ def test_an_explicit_step_beyond_the_bound_is_recorded_unstable(study):
 
 def test_the_reference_resolves_its_window(study):
     ref = study.references["hanging"]
-    assert 1 <= ref.window <= 4
+    assert ref.window == 4  # before it folds, the swing is resolved at every sample (0.2-0.4 mm measured)
     assert np.all(ref.sample_floor[:ref.window] <= tr.FLOOR)
     assert ref.floor["rms_error"] <= tr.FLOOR
     # every stable configuration is farther from the reference than the reference's own error estimate
