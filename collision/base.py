@@ -1,6 +1,6 @@
 """What every collider shares: binding to the cloth's fields, start-of-step positions, the velocity response."""
 import taichi as ti
-from .fields import FieldBlock
+from clothbase.fields import FieldBlock
 
 
 @ti.data_oriented

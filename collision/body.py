@@ -19,8 +19,8 @@ import taichi as ti
 from .geometry import closest_point_on_triangle, collision_possibility, inside_triangle, segment_triangle, solid_angle
 from .base import ParticleCollider
 from .grid import VoxelGrid
-from .meshes import validate_triangle_mesh
-from .fields import FieldBlock
+from clothbase.meshes import validate_triangle_mesh
+from clothbase.fields import FieldBlock
 
 MODES = ("fuzzy", "exact")
 _CANDIDATES, _TESTS, _HITS, _CONTACTS, _OVERFLOW, _QUERIES = range(6)

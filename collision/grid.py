@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 import taichi as ti
-from .fields import FieldBlock
+from clothbase.fields import FieldBlock
 
 
 @ti.data_oriented

@@ -11,7 +11,7 @@ import numpy as np
 import taichi as ti
 
 from .base import ParticleCollider
-from .fields import FieldBlock
+from clothbase.fields import FieldBlock
 
 
 @ti.func

@@ -15,7 +15,7 @@ import taichi as ti
 from .base import ParticleCollider
 from .geometry import inside_triangle
 from .grid import VoxelGrid
-from .fields import FieldBlock
+from clothbase.fields import FieldBlock
 
 
 @ti.data_oriented

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from collision.meshes import edges_of
+from clothbase.meshes import edges_of
 
 
 @dataclass

@@ -48,7 +48,7 @@ House rules: every level is packed into the same concatenated fields (per-level 
 adjacency over global indices, one transpose table), so each kernel is compiled once and takes the level's
 offsets and counts as arguments: 5 or 9 levels compile the same kernels, switching the active level or
 changing h, omega or the pins compiles nothing. The per-level CSR is built on the host (numpy) at
-construction. Fields are allocated through collision.fields.FieldBlock.
+construction. Fields are allocated through clothbase.fields.FieldBlock.
 """
 
 from dataclasses import dataclass
@@ -56,7 +56,7 @@ from dataclasses import dataclass
 import numpy as np
 import taichi as ti
 
-from collision.fields import FieldBlock
+from clothbase.fields import FieldBlock
 
 from .hierarchy import Level, edge_use
 

@@ -10,7 +10,7 @@ The tables are refilled from the host per switch; the kernel compiles once for a
 import numpy as np
 import taichi as ti
 
-from collision.fields import FieldBlock
+from clothbase.fields import FieldBlock
 
 from .hierarchy import Level
 

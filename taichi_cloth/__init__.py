@@ -9,7 +9,8 @@ Scene (the only time loop), recorded by a Recorder. Units are SI throughout (m, 
     scene.step(100)
     x = scene.positions()
 """
-from .builder import ClothBuilder, ClothData, SpringKind
+from .builder import ClothBuilder
+from .cloth import ClothData, SpringKind
 from .diagnostics import Measurement
 from .errors import BlowUpError, MeshError, SceneError, TaichiClothError
 from .integrators import INTEGRATORS

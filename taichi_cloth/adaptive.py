@@ -210,7 +210,7 @@ class AdaptiveStep:
             return
         s = self.scene.state
         if self._x0 is None:
-            from collision.fields import FieldBlock
+            from clothbase.fields import FieldBlock
 
             blk = FieldBlock()
             self._x0 = blk.vector(3, self.scene.model.fp, self.scene.model.capacity[0])

@@ -117,7 +117,7 @@ def _cmd_run(args) -> int:
 
 def _cmd_flatten(args) -> int:
     """`flatten piece.obj [...] --out pieces.dxf`: flatten 3D pieces, print the error table, write DXF + PNG."""
-    from collision.meshes import load_triangle_mesh
+    from clothbase.meshes import load_triangle_mesh
 
     from . import runtime
     from .flatten import flatten_pieces, format_table, plot_flat, write_flat_dxf

@@ -16,7 +16,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from collision import MeshCollider, PrimitiveColliders, load_triangle_mesh
+from clothbase.meshes import load_triangle_mesh
+from collision import MeshCollider, PrimitiveColliders
 
 DEFAULT_THICKNESS = 0.003  # m
 DEFAULT_FRICTION = 0.3

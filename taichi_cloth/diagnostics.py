@@ -4,8 +4,8 @@ from dataclasses import dataclass
 
 import taichi as ti
 
-from .builder import SpringKind
-from collision.fields import FieldBlock
+from .cloth import SpringKind
+from clothbase.fields import FieldBlock
 
 _KINETIC, _ELASTIC, _GRAVITY, _MAX_STRAIN, _MAX_SPEED, _NONFINITE = range(6)
 

@@ -20,7 +20,7 @@ class BodyError(TaichiClothError, ValueError):
 
 # A mesh is unusable (missing, empty, non-manifold, NaN vertices, degenerate faces): the message names the file.
 # Defined by the collision package (which loads bodies and cloth meshes and must not import taichi_cloth).
-from collision.errors import MeshError  # noqa: E402
+from clothbase.errors import EngineWarning, MeshError, warn  # noqa: E402
 
 __all__ = ["BlowUpError", "BodyError", "MeshError", "PatternError", "SceneError", "TaichiClothError"]
 

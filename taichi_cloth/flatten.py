@@ -8,7 +8,7 @@ A 3D piece (a draped garment piece, or any triangle mesh with disc topology) is 
    a consistently wound disc lands counter-clockwise). One BFS wave is one vectorised numpy step.
 2. Planar spring relaxation with the engine's own mass-spring model, as the seed does ("the same model and
    computation, without gravity, sewing or collision forces"): one structural spring per triangle edge with the
-   3D edge length as rest length (the isotropic constants of `ClothBuilder.triangle_mesh`), masses from the 3D
+   3D edge length as rest length (the isotropic constants of `taichi_cloth.cloth.mesh_cloth`), masses from the 3D
    areas, no bend springs (a planar sheet has nothing to bend). It runs the implicit (BW98) integrator in
    float64 quasi-statically: velocities are zeroed before every step, so each step is a Newton step on the
    elastic energy regularised by the mass matrix (h is set so that h^2 k / m ~ 1e3 on the stiffest particle).
@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from collision.meshes import connected_components, edges_of, triangle_areas, validate_triangle_mesh
+from clothbase.meshes import connected_components, edges_of, triangle_areas, validate_triangle_mesh
 from .errors import MeshError
 
 __all__ = ["FlatPiece", "disc_boundary", "unfold", "flatten", "flatten_pieces", "write_flat_dxf", "plot_flat",
@@ -300,7 +300,7 @@ def flatten_pieces(pieces, tolerance: float = 1e-6, max_iterations: int = 500, m
 
 def _prepare(name, vertices, triangles, corners, material):
     """Checks, the unfolded layout and the planar spring system (ClothData at z = 0) of one piece."""
-    from .builder import ClothBuilder, ClothData, SpringKind
+    from .cloth import ClothData, SpringKind, mesh_cloth
 
     v = np.asarray(vertices, dtype=np.float64)
     t = np.asarray(triangles, dtype=np.int64)
@@ -311,7 +311,7 @@ def _prepare(name, vertices, triangles, corners, material):
         if i not in on_outline:
             raise MeshError(f"{name}: corner {k!r} (vertex {i}) is not on the piece's outline")
     uv0 = unfold(v, t)
-    cloth = ClothBuilder.triangle_mesh(v, t, material, source=name, stiffness_rule="isotropic")
+    cloth = mesh_cloth(v, t, material, source=name, stiffness_rule="isotropic")
     keep = cloth.kind == SpringKind.STRUCTURAL  # edges only: rest lengths from 3D, constants from 3D areas
     data = ClothData(np.column_stack([uv0, np.zeros(len(uv0))]), cloth.mass, cloth.springs[keep],
                      cloth.rest_length[keep], cloth.stiffness[keep], np.zeros(int(keep.sum())), cloth.kind[keep], t)

@@ -10,7 +10,7 @@ drag or wind writes a field and never recompiles.
 
 import numpy as np
 import taichi as ti
-from collision.fields import FieldBlock
+from clothbase.fields import FieldBlock
 
 
 @ti.data_oriented

@@ -9,9 +9,9 @@ from __future__ import annotations
 import numpy as np
 import taichi as ti
 
-from .builder import ClothData
+from .cloth import ClothData
 from .runtime import ensure_initialized
-from collision.fields import FieldBlock
+from clothbase.fields import FieldBlock
 
 _PRECISIONS = {"f32": ti.f32, "f64": ti.f64}
 

@@ -2,7 +2,7 @@
 
 Every level is built from the 2D rest (pattern) coordinates, never from a deformed shape:
 - springs: structural on the triangle legs, shear on the hypotenuses (the diamond diagonals), bend across
-  every interior edge; spring constants by the isotropic rule of ClothBuilder.triangle_mesh, so the odd
+  every interior edge; spring constants by the isotropic rule of taichi_cloth.cloth.mesh_cloth, so the odd
   (45-degree) and even levels are the same material (Young's modulus material.sheet_modulus, Poisson 1/3);
 - masses: area-lumped, density * sum of adjacent areas / 3, rescaled so that every level carries exactly
   the same total mass (for a rectangle the areas already agree; a resampled outline differs slightly).
@@ -15,7 +15,7 @@ import numpy as np
 
 from multilevel.hierarchy import signed_areas
 
-from .builder import _PLANES, ClothBuilder, ClothData, SpringKind
+from .cloth import ClothData, SpringKind, in_plane, mesh_cloth
 from .material import Material, material as as_material
 
 
@@ -55,14 +55,8 @@ def level_cloth(level, material: str | Material, center=(0.0, 0.0, 0.0), plane: 
                 total_mass: float | None = None) -> ClothData:
     """ClothData of one hierarchy level: uv [m] placed in `plane` around `center` [m]; masses rescaled
     to `total_mass` [kg] when given."""
-    if plane not in _PLANES:
-        raise ValueError(f"plane must be one of {', '.join(_PLANES)}, got {plane!r}")
-    a0, a1 = _PLANES[plane]
-    positions = np.zeros((level.n_vertices, 3))
-    positions[:, a0], positions[:, a1] = level.uv[:, 0], level.uv[:, 1]
-    positions += np.asarray(center, dtype=np.float64)
-    data = ClothBuilder.triangle_mesh(positions, level.triangles, material, source="4-8 level",
-                                      stiffness_rule="isotropic")
+    positions = in_plane(level.uv, plane, center)
+    data = mesh_cloth(positions, level.triangles, material, source="4-8 level", stiffness_rule="isotropic")
     if total_mass is not None:
         data.mass *= total_mass / data.mass.sum()
     # the hypotenuses of the regular triangles are the diamond diagonals: the "shear" springs of the level

@@ -10,7 +10,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 import taichi as ti
-from collision.fields import FieldBlock
+from clothbase.fields import FieldBlock
 
 
 class KeyframePath:

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from .adaptive import AdaptiveOptions, AdaptiveStep
-from .builder import ClothData
+from .cloth import ClothData
 from .colliders import build_colliders
 from .contacts import Contacts
 from .diagnostics import Diagnostics, Measurement

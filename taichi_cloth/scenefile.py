@@ -71,116 +71,36 @@ and a component whose table is absent is never built. The schema (units in brack
 """
 from __future__ import annotations
 
-import difflib
-import math
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
 
 from .builder import ClothBuilder
 from .errors import MeshError, PatternError, SceneError
 from .integrators import INTEGRATORS
-from .material import MATERIALS, Material, material as preset
 from .quality import QUALITIES
 from .scene import STEP_GUARDS, Scene
+from .schema import MATERIAL_TABLE, Array, Field, Table, Validator, at_least, material_of, nonneg, positive, read_toml
 
-_MISSING = object()
 #: the girths a [body] table may set (taichi_cloth.body.GIRTHS; spelled out so parsing imports no scipy)
 BODY_GIRTHS = ("chest", "underbust", "waist", "hips", "neck", "upper_arm", "thigh")
 
-
-# ---------------------------------------------------------------------- a tiny declarative schema
-@dataclass
-class Field:
-    kind: str                      # number | int | bool | str | vec2 | vec3 | int2 | points | ints | keyframes
-    default: Any = _MISSING        # _MISSING = required
-    check: Callable[[Any], str | None] | None = None
-    choices: tuple | None = None
-
-
-@dataclass
-class Table:
-    fields: dict[str, Any]
-    required: bool = False
-    allow_string: Field | None = None  # a table that may also be given as a plain value (material = "cotton")
-    extra: bool = False                # unknown keys are checked later (integrator options)
-    always: bool = False               # filled with its defaults when absent ([output])
-
-
-@dataclass
-class Array:
-    table: Table
-
-
-def _positive(v):
-    return None if v > 0 else "must be > 0"
-
-
-def _nonneg(v):
-    return None if v >= 0 else "must be >= 0"
-
-
-def _at_least(n):
-    return lambda v: None if v >= n else f"must be >= {n}"
-
-
-def _is_number(v):
-    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
-
-
-def _is_int(v):
-    return isinstance(v, int) and not isinstance(v, bool)
-
-
-def _vector(n, elem=_is_number):
-    return lambda v: isinstance(v, list) and len(v) == n and all(elem(x) for x in v)
-
-
-_KINDS: dict[str, tuple[Callable[[Any], bool], str]] = {
-    "number": (_is_number, "a number"),
-    "int": (_is_int, "an integer"),
-    "bool": (lambda v: isinstance(v, bool), "true or false"),
-    "str": (lambda v: isinstance(v, str), "a string"),
-    "vec2": (_vector(2), "a list of 2 numbers"),
-    "vec3": (_vector(3), "a list of 3 numbers"),
-    "int2": (_vector(2, _is_int), "a list of 2 integers"),
-    "ints": (lambda v: isinstance(v, list) and all(_is_int(x) for x in v), "a list of integers"),
-    "points": (lambda v: isinstance(v, list) and len(v) > 0 and all(_vector(3)(p) for p in v),
-               "a list of [x, y, z] points"),
-    "keyframes": (lambda v: isinstance(v, list) and len(v) > 0 and all(_vector(4)(p) for p in v),
-                  "a list of [t, dx, dy, dz] rows"),
-    "tables": (lambda v: isinstance(v, list) and len(v) > 0 and all(isinstance(p, dict) for p in v),
-               "a list of inline tables"),
-    "corner": (lambda v: isinstance(v, str) or _is_int(v), "a corner name or index"),
-    "point": (lambda v: isinstance(v, str) or _is_int(v) or _vector(2)(v), "a corner name or index, or [u, v]"),
-    "names": (lambda v: isinstance(v, dict) and all(_is_int(i) for i in v.values()),
-              "a table of corner name = index"),
-    "dt": (lambda v: v == "auto" or _is_number(v), 'a number of seconds or "auto"'),
-}
 
 #: [integrator] dt: seconds, or "auto" (taichi_cloth.adaptive); [integrator] adaptive: the rule's parameters
 #: (defaults in AdaptiveOptions, so absent keys stay None here and are dropped)
 DT_FIELD = Field("dt", check=lambda v: None if v == "auto" or v > 0 else "must be > 0")
 ADAPTIVE_TABLE = Table({"safety": Field("number", None, lambda v: None if 0 < v <= 1 else "must lie in (0, 1]"),
-                        "dt_min": Field("number", None, _positive), "dt_max": Field("number", None, _positive),
+                        "dt_min": Field("number", None, positive), "dt_max": Field("number", None, positive),
                         "growth": Field("number", None, lambda v: None if v > 1 else "must be > 1"),
-                        "calm_steps": Field("int", None, _at_least(1)), "motion": Field("number", None, _positive),
+                        "calm_steps": Field("int", None, at_least(1)), "motion": Field("number", None, positive),
                         "rollback": Field("bool", None)})
-
-MATERIAL_TABLE = Table({"preset": Field("str", None, choices=tuple(MATERIALS)),
-                        "density": Field("number", None, _positive), "stretch": Field("number", None, _nonneg),
-                        "shear": Field("number", None, _nonneg), "bend": Field("number", None, _nonneg),
-                        "damping": Field("number", None, _nonneg)},
-                       allow_string=Field("str", choices=tuple(MATERIALS)))
 
 SCHEMA = Table({
     "name": Field("str", None),
-    "frames": Field("int", 120, _at_least(0)),
-    "fps": Field("number", 60.0, _positive),
+    "frames": Field("int", 120, at_least(0)),
+    "fps": Field("number", 60.0, positive),
     "precision": Field("str", "f32", choices=("f32", "f64")),
     "gravity": Field("vec3", [0.0, -9.81, 0.0]),
-    "air_damping": Field("number", 0.1, _nonneg),
+    "air_damping": Field("number", 0.1, nonneg),
     "self_collision": Field("bool", False),
     "quality": Field("str", None, choices=QUALITIES),
     "cloth": Table({
@@ -189,7 +109,7 @@ SCHEMA = Table({
                        "resolution": Field("int2", None, check=lambda v: None if min(v) >= 2 else "must be >= 2 each"),
                        "center": Field("vec3", [0.0, 0.0, 0.0]),
                        "plane": Field("str", "xy", choices=("xy", "xz", "yz", "zy"))}),
-        "mesh": Table({"path": Field("str"), "scale": Field("number", 1.0, _positive),
+        "mesh": Table({"path": Field("str"), "scale": Field("number", 1.0, positive),
                        "translate": Field("vec3", [0.0, 0.0, 0.0])}),
         "garment": Field("str", None),
     }, required=True),
@@ -199,123 +119,45 @@ SCHEMA = Table({
     "pins": Array(Table({"indices": Field("ints", []), "near": Field("points", []),
                          "box": Table({"min": Field("vec3"), "max": Field("vec3")}),
                          "keyframes": Field("keyframes", None)})),
-    "wind": Table({"velocity": Field("vec3"), "coefficient": Field("number", 1.0, _nonneg),
-                   "gust": Field("number", 0.0, _nonneg), "gust_frequency": Field("number", 0.5, _positive)}),
-    "stretch_limit": Table({"max_strain": Field("number", 0.1, _positive),
-                            "iterations": Field("int", 100, _at_least(1)),
-                            "tolerance": Field("number", 1e-3, _nonneg),
+    "wind": Table({"velocity": Field("vec3"), "coefficient": Field("number", 1.0, nonneg),
+                   "gust": Field("number", 0.0, nonneg), "gust_frequency": Field("number", 0.5, positive)}),
+    "stretch_limit": Table({"max_strain": Field("number", 0.1, positive),
+                            "iterations": Field("int", 100, at_least(1)),
+                            "tolerance": Field("number", 1e-3, nonneg),
                             "omega": Field("number", 1.5, lambda v: None if 0 < v < 2 else "must lie in (0, 2)")}),
     "colliders": Array(Table({
         "type": Field("str", choices=("sphere", "capsule", "plane", "mesh", "standin")),
-        "center": Field("vec3", None), "radius": Field("number", None, _positive),
+        "center": Field("vec3", None), "radius": Field("number", None, positive),
         "a": Field("vec3", None), "b": Field("vec3", None),
         "point": Field("vec3", None), "normal": Field("vec3", None),
-        "path": Field("str", None), "scale": Field("number", None, _positive), "translate": Field("vec3", None),
-        "cell_size": Field("number", None, _positive), "mode": Field("str", None, choices=("fuzzy", "exact")),
-        "repulsion": Table({"stiffness": Field("number", 1e-3, _nonneg), "distance": Field("number", 0.01, _positive),
-                            "max_force": Field("number", 0.05, _positive)}),
-        "thickness": Field("number", 0.003, _positive), "friction": Field("number", 0.3, _nonneg)})),
+        "path": Field("str", None), "scale": Field("number", None, positive), "translate": Field("vec3", None),
+        "cell_size": Field("number", None, positive), "mode": Field("str", None, choices=("fuzzy", "exact")),
+        "repulsion": Table({"stiffness": Field("number", 1e-3, nonneg), "distance": Field("number", 0.01, positive),
+                            "max_force": Field("number", 0.05, positive)}),
+        "thickness": Field("number", 0.003, positive), "friction": Field("number", 0.3, nonneg)})),
     "multilevel": Table({
         "levels": Field("int", 5, lambda v: None if 1 <= v <= 8 else "must lie in 1..8"),
         "base_cells": Field("int2", [4, 4], lambda v: None if min(v) >= 1 else "must be >= 1 each"),
-        "start_level": Field("int", 1, _at_least(1)),
+        "start_level": Field("int", 1, at_least(1)),
         "refine": Field("str", "global", choices=("global", "local", "none")),
         "angle": Field("number", 20.0, lambda v: None if 0 < v < 180 else "must lie in (0, 180) degrees"),
         "dt_growth": Field("number", 1.0, lambda v: None if 1 <= v <= 2 else "must lie in [1, 2]"),
-        "settle": Table({"max_speed": Field("number", 0.05, _positive),
-                         "energy_change": Field("number", 1e-4, _positive),
-                         "window": Field("int", 10, _at_least(1)),
-                         "max_time": Field("number", 3.0, _positive)}, always=True),
+        "settle": Table({"max_speed": Field("number", 0.05, positive),
+                         "energy_change": Field("number", 1e-4, positive),
+                         "window": Field("int", 10, at_least(1)),
+                         "max_time": Field("number", 3.0, positive)}, always=True),
     }),
-    "sewing": Table({"close_speed": Field("number", 0.5, _positive), "max_force": Field("number", 5.0, _positive),
-                     "epsilon": Field("number", 0.002, _positive), "energy_tolerance": Field("number", 1e-2, _positive),
+    "sewing": Table({"close_speed": Field("number", 0.5, positive), "max_force": Field("number", 5.0, positive),
+                     "epsilon": Field("number", 0.002, positive), "energy_tolerance": Field("number", 1e-2, positive),
                      "gravity": Field("bool", False), "join": Field("str", "merge", choices=("merge", "spring", "none")),
-                     "join_stiffness": Field("number", None, _positive), "max_time": Field("number", 10.0, _positive),
-                     "stiffness": Field("number", None, _positive)}),
-    "body": Table({**{g: Field("number", None, _positive) for g in BODY_GIRTHS},
+                     "join_stiffness": Field("number", None, positive), "max_time": Field("number", 10.0, positive),
+                     "stiffness": Field("number", None, positive)}),
+    "body": Table({**{g: Field("number", None, positive) for g in BODY_GIRTHS},
                    "morph": Field("str", "before", choices=("before", "during")),
-                   "morph_time": Field("number", 1.0, _positive), "tolerance": Field("number", 1e-3, _positive)}),
+                   "morph_time": Field("number", 1.0, positive), "tolerance": Field("number", 1e-3, positive)}),
     "output": Table({"dir": Field("str", "out"), "record": Field("bool", True), "mesh": Field("bool", True),
-                     "record_every": Field("int", 1, _at_least(1))}, always=True),
+                     "record_every": Field("int", 1, at_least(1))}, always=True),
 })
-
-
-class _Validator:
-    """Checks data against the schema. Locations read like the TOML: `[cloth.grid] size`, `[[pins]] #2 near`."""
-
-    def __init__(self, source: str):
-        self.source = source
-
-    def fail(self, where: str, msg: str):
-        raise SceneError(f"{self.source}: {where}: {msg}" if where else f"{self.source}: {msg}")
-
-    @staticmethod
-    def key_at(table: str, key: str) -> str:
-        return f"{table} {key}" if table else key
-
-    def value(self, spec: Field, v, where: str):
-        ok, what = _KINDS[spec.kind]
-        if spec.kind == "number" and _is_int(v):
-            v = float(v)
-        if not ok(v):
-            self.fail(where, f"must be {what}, got {v!r}")
-        if spec.choices is not None and v not in spec.choices:
-            self.fail(where, f"{v!r} is not one of: {', '.join(map(str, spec.choices))}")
-        if spec.check is not None:
-            problem = spec.check(v)
-            if problem:
-                self.fail(where, f"{problem}, got {v!r}")
-        return v
-
-    def table(self, spec: Table, data, name: str, label: str) -> dict:
-        """Validate table `data`; `name` is its dotted TOML name ("" at top level), `label` how errors show it."""
-        if not isinstance(data, dict):
-            if spec.allow_string is not None:
-                return {"preset": self.value(spec.allow_string, data, label)}
-            self.fail(label, f"must be a table, got {data!r}")
-        out = {}
-        for key, value in data.items():
-            sub = spec.fields.get(key)
-            if sub is None:
-                if spec.extra:
-                    out[key] = value
-                    continue
-                near = difflib.get_close_matches(key, list(spec.fields), n=1)
-                hint = f" (did you mean {near[0]!r}?)" if near else f" (known keys: {', '.join(spec.fields)})"
-                self.fail(label or "top level", f"unknown key {key!r}{hint}")
-            out[key] = self.node(sub, value, name, key, label)
-        for key, sub in spec.fields.items():
-            if key in out:
-                continue
-            if isinstance(sub, Field):
-                if sub.default is _MISSING:
-                    self.fail(label or "top level", f"missing required key {key!r}")
-                out[key] = sub.default
-            elif isinstance(sub, Table) and sub.required:
-                self.fail(label or "top level", f"missing required table [{self.dotted(name, key)}]")
-            elif isinstance(sub, Table) and sub.always:
-                out[key] = self.table(sub, {}, self.dotted(name, key), f"[{self.dotted(name, key)}]")
-            elif isinstance(sub, Array):
-                out[key] = []
-        return out
-
-    @staticmethod
-    def dotted(name: str, key: str) -> str:
-        return f"{name}.{key}" if name else key
-
-    def node(self, spec, value, name: str, key: str, label: str):
-        if isinstance(spec, Field):
-            return self.value(spec, value, self.key_at(label, key))
-        if isinstance(spec, Table):
-            if not isinstance(value, dict) and spec.allow_string is not None:
-                return {"preset": self.value(spec.allow_string, value, self.key_at(label, key))}
-            sub = self.dotted(name, key)
-            return self.table(spec, value, sub, f"[{sub}]" if not label.startswith("[[") else f"{label} {key}")
-        if isinstance(spec, Array):
-            if not isinstance(value, list) or not all(isinstance(v, dict) for v in value):
-                self.fail(self.key_at(label, key), "must be an array of tables ([[...]])")
-            return [self.table(spec.table, v, key, f"[[{key}]] #{k + 1}") for k, v in enumerate(value)]
-        raise TypeError(spec)
 
 
 # ---------------------------------------------------------------------- building
@@ -330,21 +172,6 @@ class LoadedScene:
     config: dict = field(repr=False, default_factory=dict)
 
 
-def read_toml(path: Path, label: str, what: str, error=SceneError) -> dict:
-    """The TOML file at `path` as a dict, its `name` defaulting to the file's stem; `error` (naming `label`)
-    if it is missing, not TOML or not UTF-8 text. `what` says which kind of file ("scene", "garment")."""
-    if not path.is_file():
-        raise error(f"{label}: no such {what} file")
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except tomllib.TOMLDecodeError as exc:
-        raise error(f"{label}: not valid TOML: {exc}") from None
-    except UnicodeDecodeError:
-        raise error(f"{label}: not a UTF-8 text file") from None
-    data.setdefault("name", path.stem)
-    return data
-
-
 def parse_scene(source: str | Path | dict, base_dir: Path | None = None, label: str | None = None) -> dict:
     """Validate a scene (TOML path or dict) and return the config dict with defaults filled in.
     Raises SceneError with one line naming the file, table and key."""
@@ -355,7 +182,7 @@ def parse_scene(source: str | Path | dict, base_dir: Path | None = None, label: 
         label = label or str(path)
         data = read_toml(path, label, "scene")
         base_dir = base_dir or path.parent
-    v = _Validator(label)
+    v = Validator(label)
     cfg = v.table(SCHEMA, data, "", "")
     cfg["name"] = cfg["name"] or "scene"
     cfg["_label"], cfg["_base_dir"] = label, base_dir
@@ -400,7 +227,7 @@ COLLIDER_KEYS = {"sphere": ({"center", "radius"}, set()), "capsule": ({"a", "b",
                  "mesh": ({"path"}, {"scale", "translate", "cell_size", "mode", "repulsion"})}
 
 
-def _check_collider(v: "_Validator", col: dict, where: str) -> None:
+def _check_collider(v: "Validator", col: dict, where: str) -> None:
     required, optional = COLLIDER_KEYS[col["type"]]
     given = {k for k, val in col.items() if val is not None} - {"type", "thickness", "friction"}
     for key in sorted(required - given):
@@ -414,7 +241,7 @@ def _check_collider(v: "_Validator", col: dict, where: str) -> None:
         del col[key]
 
 
-def _check_integrator_options(v: _Validator, integ: dict) -> None:
+def _check_integrator_options(v: Validator, integ: dict) -> None:
     cls = INTEGRATORS[integ["name"]]
     if integ.get("adaptive") is not None and integ["dt"] != "auto":
         v.fail("[integrator] adaptive", f'needs dt = "auto" (dt is {integ["dt"]!r})')
@@ -429,16 +256,10 @@ def _check_integrator_options(v: _Validator, integ: dict) -> None:
         integ[key] = v.value(Field(kind, check=opt.check), val, where)
 
 
-def _material(cfg: dict) -> Material:
-    m = cfg["cloth"].get("material") or {"preset": "cotton"}
-    base = preset(m.get("preset") or "cotton")
-    return base.replace(**{k: val for k, val in m.items() if k != "preset" and val is not None})
-
-
 def build_scene(cfg: dict) -> Scene:
     """Build the Scene a validated config describes (only the components it names)."""
     label = cfg["_label"]
-    cloth_cfg, mat = cfg["cloth"], _material(cfg)
+    cloth_cfg, mat = cfg["cloth"], material_of(cfg["cloth"].get("material"))
     body, body_morph, colliders = None, None, cfg["colliders"]
     if cfg.get("body") is not None:
         body, body_morph, colliders = _body(cfg["body"], colliders, label)
@@ -553,7 +374,7 @@ def load_scene(source: str | Path | dict, *, frames: int | None = None, integrat
     measured preset (taichi_cloth.quality); `integrator` and `dt` then override the preset's choice.
     Overriding the integrator drops the file's options that the new integrator does not have."""
     cfg = parse_scene(source)
-    v = _Validator(cfg["_label"] + " (override)")
+    v = Validator(cfg["_label"] + " (override)")
     if quality is not None:
         cfg["quality"] = v.value(Field("str", choices=QUALITIES), quality, "--quality")
     if cfg["quality"] is not None:
@@ -571,7 +392,7 @@ def load_scene(source: str | Path | dict, *, frames: int | None = None, integrat
         if dt != "auto":
             cfg["integrator"].pop("adaptive", None)  # a fixed step replaces the automatic one
     if frames is not None:
-        cfg["frames"] = v.value(Field("int", check=_at_least(0)), frames, "--frames")
+        cfg["frames"] = v.value(Field("int", check=at_least(0)), frames, "--frames")
     if precision is not None:
         cfg["precision"] = v.value(Field("str", choices=("f32", "f64")), precision, "--precision")
     if out is not None:

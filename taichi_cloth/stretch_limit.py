@@ -12,8 +12,8 @@ divided by h, so the removed stretching velocity goes too.
 import numpy as np
 import taichi as ti
 
-from .builder import SpringKind
-from collision.fields import FieldBlock
+from .cloth import SpringKind
+from clothbase.fields import FieldBlock
 
 
 @ti.data_oriented

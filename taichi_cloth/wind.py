@@ -13,7 +13,7 @@ import numpy as np
 import taichi as ti
 
 from .normals import VertexNormals
-from collision.fields import FieldBlock
+from clothbase.fields import FieldBlock
 
 
 @ti.data_oriented

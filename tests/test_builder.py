@@ -3,8 +3,8 @@ import numpy as np
 import pytest
 
 import taichi_cloth as tc
-from taichi_cloth.builder import SpringKind
-from taichi_cloth.mesh import edges_of, interior_edge_opposites
+from taichi_cloth.cloth import SpringKind
+from clothbase.meshes import edges_of, interior_edge_opposites
 
 
 @pytest.mark.parametrize("nu,nv", [(2, 2), (5, 3), (16, 16)])

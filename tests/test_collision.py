@@ -6,7 +6,9 @@ import taichi as ti
 import trimesh
 
 import taichi_cloth as tc
-from collision import MeshCollider, MeshError, PrimitiveColliders, VoxelGrid, repair_triangle_mesh
+from clothbase.errors import MeshError
+from clothbase.meshes import repair_triangle_mesh
+from collision import MeshCollider, PrimitiveColliders, VoxelGrid
 
 INTEGRATORS = ["explicit", "verlet", "central-difference", "approx-implicit", "implicit"]
 

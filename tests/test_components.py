@@ -54,7 +54,7 @@ def test_field_blocks_of_dead_owners_are_recycled():
 
     import numpy as np
 
-    from collision import fields
+    from clothbase import fields
 
     class Owner:
         """Anything whose lifetime a block follows."""
@@ -69,4 +69,4 @@ def test_field_blocks_of_dead_owners_are_recycled():
             assert f.to_numpy()[7] == 7.0
         del owner, blk, f
         gc.collect()
-    assert fields._live <= fields.LIVE_TREE_LIMIT + 2
+    assert fields.live_trees() <= fields.LIVE_TREE_LIMIT + 2

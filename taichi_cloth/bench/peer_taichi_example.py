@@ -212,7 +212,7 @@ class ExamplePhysics:
         """The example as ClothData: start `positions` (P,3) [m] (default start_positions()), rest lengths from
         the grid (not from the start, which may be deformed), k = spring_Y / L0, kd = dashpot_damping x
         quad_size, 1 kg particles, the example's triangles."""
-        from ..builder import ClothData, SpringKind
+        from ..cloth import ClothData, SpringKind
 
         n, q = self.n, self.quad_size
         x = self.start_positions() if positions is None else np.asarray(positions, np.float64)

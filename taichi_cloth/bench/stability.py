@@ -1,10 +1,10 @@
 """Stability envelope: stable, unstable or refused over stiffness x time step x mass ratio, for every integrator.
 
-For each integrator and mass ratio, one probe scene (taichi_cloth.stability.probe_scene: a 6x6 sheet, two corners
+For each integrator and mass ratio, one probe scene (taichi_cloth.bench.probes.probe_scene: a 6x6 sheet, two corners
 pinned, no gravity, a checkerboard of light and heavy particles, air drag 0.1 1/s, spring damping kd/k = 1e-6 s)
 is reused over the whole sweep: the stiffest spring is set to k through Model.set_stiffness and dt is passed,
 so each kernel compiles once. Every cell (k, dt) is a run of --n-steps steps from a random perturbation (1 mm,
-less on stiff cloth: stability.probe_amplitude), checked for a blow-up every --check-every steps, and classified:
+less on stiff cloth: probes.probe_amplitude), checked for a blow-up every --check-every steps, and classified:
 
   .  stable      ran all its steps
   X  unstable    a BlowUpError was raised (detected and reported; the CSV has the step it was caught at)
@@ -79,7 +79,7 @@ def _check(args) -> str | None:
 def _outcome(scene, k: float, dt: float, rng, args) -> tuple[str, int | None, str]:
     """Run one cell: ("stable" | "unstable", step caught at or None, reason)."""
     from ..errors import BlowUpError
-    from ..stability import probe_run
+    from .probes import probe_run
 
     try:
         probe_run(scene, k, dt, rng, steps=args.n_steps, check_every=args.check_every)
@@ -108,7 +108,8 @@ def _label(refused: bool, outcome: str) -> str:
 def map_integrator(name: str, ratio: float, args, rng) -> tuple[list[dict], list[dict]]:
     """(cells, bounds) of one integrator and mass ratio: a dict per (k, dt) cell and one per k."""
     from ..adaptive import AdaptiveOptions, frame_steps, step_cap
-    from ..stability import critical_step, omega_max_exact, probe_scene, set_max_stiffness, stable_dt
+    from ..stability import omega_max_exact, stable_dt
+    from .probes import critical_step, probe_scene, set_max_stiffness
 
     scene = probe_scene(name, ratio)
     cls, air = type(scene.integrator), scene.forces.air_damping_value

@@ -5,7 +5,7 @@ by the girth gauge (taichi_cloth.body.girth). Numpy only; imports nothing from t
 import it.
 
 - `MeshSlicer(vertices, triangles)`: vertices (V,3) float64 [m], triangles (T,3) int64; builds the unique edges
-  once (collision.meshes.edges_of) and cuts the surface with planes: `slice(origin, normal, vmask)` returns
+  once (clothbase.meshes.edges_of) and cuts the surface with planes: `slice(origin, normal, vmask)` returns
   the closed loops (`Loop`) where the plane crosses the surface. `with_vertices(v)` reuses the topology for a
   morph of the same mesh (same triangles), which is how a girth gauge measures many morphs cheaply.
 - `Loop`: centroid (3,) [m], polyline length [m], points (k,3) [m]. The points are the plane's crossings of the
@@ -17,7 +17,7 @@ import it.
 """
 import numpy as np
 
-from collision.meshes import connected_components, edges_of
+from clothbase.meshes import connected_components, edges_of
 
 __all__ = ["Loop", "MeshSlicer", "convex_hull", "hull_perimeter", "loop_girth", "plane_basis"]
 

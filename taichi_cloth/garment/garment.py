@@ -3,7 +3,7 @@
 zero-rest-length seam spring per seam pair appended after the cloth's own springs.
 
 Rest lengths, masses and spring constants come from the 2D pattern (the isotropic rule of
-ClothBuilder.triangle_mesh), never from the placed 3D shape, so a piece bent around the body starts with the
+taichi_cloth.cloth.mesh_cloth), never from the placed 3D shape, so a piece bent around the body starts with the
 strain of its placement and relaxes toward its pattern.
 """
 from __future__ import annotations
@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..builder import ClothBuilder, ClothData, SpringKind
+from ..cloth import ClothData, SpringKind, mesh_cloth
 from ..errors import PatternError
 from ..material import Material, material as as_material
 from .mesh import PieceMesh, mesh_piece
@@ -202,7 +202,7 @@ def build_garment(spec: GarmentSpec, body: Body | None = None, seam_stiffness: f
     uv3 = np.zeros((offsets[-1], 3))
     uv3[:, :2] = np.concatenate([m.uv for m in meshes])
     tris = np.concatenate([m.triangles + offsets[k] for k, m in enumerate(meshes)])
-    data = ClothBuilder.triangle_mesh(uv3, tris, mat, source=f"garment {spec.name!r}", stiffness_rule="isotropic")
+    data = mesh_cloth(uv3, tris, mat, source=f"garment {spec.name!r}", stiffness_rule="isotropic")
 
     placed = np.concatenate([place_piece(m.uv, spec.placements[m.piece.name], body) for m in meshes])
 

@@ -40,9 +40,9 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
-from ..errors import PatternError, SceneError
+from ..errors import PatternError
 from ..material import Material
-from ..scenefile import MATERIAL_TABLE, Array, Field, Table, _nonneg, _positive, _Validator, read_toml
+from ..schema import MATERIAL_TABLE, Array, Field, Table, Validator, material_of, nonneg, positive, read_toml
 from .garment import FixedPoint, FreePlacement, GarmentSpec
 from .pattern import PatternPiece, unit_scale
 from .placement import Placement
@@ -54,21 +54,21 @@ GARMENT_SCHEMA = Table({
     "name": Field("str", None),
     "units": Field("str", "m", choices=("m", "cm", "mm", "in")),
     "material": MATERIAL_TABLE,
-    "spacing": Field("number", check=_positive),
+    "spacing": Field("number", check=positive),
     "levels": Field("int", 1, lambda v: None if 1 <= v <= 6 else "must lie in 1..6"),
     "dxf": Field("str", None),
     "pieces": Array(Table({
         "name": Field("str"), "outline": Field("tables", None), "copy": Field("str", None),
         "mirror": Field("bool", False), "corners": Field("names", None),
         "placement": Table({"anchor": Field("str", None), "at": Field("vec2", None),
-                            "offset": Field("number", None, _nonneg), "wrap": Field("bool", True),
+                            "offset": Field("number", None, nonneg), "wrap": Field("bool", True),
                             "height": Field("number", 0.0), "angle": Field("number", 0.0),
                             "origin": Field("vec3", None), "u_axis": Field("vec3", [1.0, 0.0, 0.0]),
                             "v_axis": Field("vec3", [0.0, 1.0, 0.0])}, required=True)})),
     "seams": Array(Table({"name": Field("str", None), "a": _SIDE, "b": _SIDE,
-                          "tolerance": Field("number", DEFAULT_LENGTH_TOLERANCE, _positive)})),
+                          "tolerance": Field("number", DEFAULT_LENGTH_TOLERANCE, positive)})),
     "fixed": Array(Table({"piece": Field("str"), "point": Field("point"), "anchor": Field("str", None),
-                          "offset": Field("number", None, _nonneg)})),
+                          "offset": Field("number", None, nonneg)})),
 })
 
 
@@ -77,10 +77,7 @@ def load_garment(path, material: Material | None = None) -> GarmentSpec:
     path = Path(path)
     label = str(path)
     data = read_toml(path, label, "garment", PatternError)
-    try:
-        cfg = _Validator(label).table(GARMENT_SCHEMA, data, "", "")
-    except SceneError as exc:
-        raise PatternError(str(exc)) from None
+    cfg = Validator(label, PatternError).table(GARMENT_SCHEMA, data, "", "")
     try:
         return _spec(cfg, path, material)
     except PatternError as exc:
@@ -148,11 +145,7 @@ def _spec(cfg: dict, path: Path, material: Material | None) -> GarmentSpec:
     fixed = [FixedPoint(f["piece"], f["point"] if not isinstance(f["point"], list) else
                         (s * f["point"][0], s * f["point"][1]), f["anchor"],
                         **({} if f["offset"] is None else {"offset": s * f["offset"]})) for f in cfg["fixed"]]
-    mat = material
-    if mat is None:
-        from ..scenefile import _material
-
-        mat = _material({"cloth": {"material": cfg.get("material")}})
+    mat = material if material is not None else material_of(cfg.get("material"))
     spec = GarmentSpec(cfg["name"], list(pieces.values()), seams, placements, fixed, mat, s * cfg["spacing"],
                        cfg["levels"])
     spec.validate()

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..builder import SpringKind
+from ..cloth import SpringKind
 
 
 def vertex_strain(data, x: np.ndarray) -> np.ndarray:

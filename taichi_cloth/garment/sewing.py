@@ -22,9 +22,9 @@ from dataclasses import dataclass
 import numpy as np
 import taichi as ti
 
-from collision.meshes import connected_components, edges_of
+from clothbase.meshes import connected_components, edges_of
 
-from ..builder import ClothData, SpringKind
+from ..cloth import ClothData, SpringKind
 
 JOINS = ("merge", "spring", "none")
 

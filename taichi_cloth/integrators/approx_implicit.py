@@ -36,7 +36,7 @@ from .base import Integrator, Option, at_least_one
 
 def non_negative(v):
     return None if v >= 0 else "must be >= 0"
-from collision.fields import FieldBlock
+from clothbase.fields import FieldBlock
 
 
 @ti.data_oriented

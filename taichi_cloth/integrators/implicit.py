@@ -18,7 +18,7 @@ import math
 import taichi as ti
 
 from .base import Integrator, Option, at_least_one, positive
-from collision.fields import FieldBlock
+from clothbase.fields import FieldBlock
 
 
 @ti.data_oriented

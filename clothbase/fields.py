@@ -1,4 +1,4 @@
-"""Taichi fields allocated in one releasable SNode tree per component (shared with taichi_cloth).
+"""Taichi fields allocated in one releasable SNode tree per component (every package of the engine uses it).
 
 Taichi puts fields created between two kernel launches into a new SNode tree and never frees it; after
 about 500 trees the CPU runtime crashes (seen: a segfault in from_numpy). A process that builds many scenes
@@ -51,6 +51,11 @@ class FieldBlock:
         self.tree = self.builder.finalize()
         _live += 1
         weakref.finalize(owner, _retired.append, self.tree)
+
+
+def live_trees() -> int:
+    """How many field trees exist (live and retired but not yet destroyed)."""
+    return _live
 
 
 def flush_retired() -> int:

@@ -1,0 +1,131 @@
+"""ClothData: a cloth before it lives in Taichi fields (numpy, SI units), and the rules that make springs.
+
+A cloth is particles with masses and springs of four kinds. Rest lengths always come from the rest (pattern or
+initial) positions, never from a deformed shape; masses are lumped from area, so the total mass is exactly
+density x area. `mesh_cloth` is the spring rule of an arbitrary triangle mesh (used by ClothBuilder, the 4-8 levels
+and the garments); the grid has its own (taichi_cloth.builder).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import IntEnum
+
+import numpy as np
+
+from clothbase.meshes import edges_of, interior_edge_opposites, triangle_areas, validate_triangle_mesh
+
+from .material import Material, material as as_material
+
+#: plane name -> the coordinate axes (u, v) of a flat cloth laid in it ("xy": hanging, "xz": horizontal)
+PLANES = {"xy": (0, 1), "xz": (0, 2), "yz": (1, 2), "zy": (2, 1)}
+
+
+class SpringKind(IntEnum):
+    """What a spring models. Stored as int32 in Model.spring_kind."""
+
+    STRUCTURAL = 0
+    SHEAR = 1
+    BEND = 2
+    SEAM = 3
+
+
+@dataclass
+class ClothData:
+    """A cloth before it lives in Taichi fields (all numpy, SI units).
+
+    positions:   (P,3) float64 [m]  initial positions (also the rest shape unless rest_positions is set)
+    mass:        (P,)  float64 [kg]
+    springs:     (S,2) int64        particle indices (a, b)
+    rest_length: (S,)  float64 [m]
+    stiffness:   (S,)  float64 [N/m]
+    damping:     (S,)  float64 [N*s/m]
+    kind:        (S,)  int64        SpringKind
+    triangles:   (T,3) int64        for rendering, normals and wind (may be empty for a chain)
+    grid_shape:  (nu, nv) for grids (particle i + nu*j), else None
+    """
+
+    positions: np.ndarray
+    mass: np.ndarray
+    springs: np.ndarray
+    rest_length: np.ndarray
+    stiffness: np.ndarray
+    damping: np.ndarray
+    kind: np.ndarray
+    triangles: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.int64))
+    grid_shape: tuple[int, int] | None = None
+
+    @property
+    def n_particles(self) -> int:
+        return len(self.positions)
+
+    @property
+    def n_springs(self) -> int:
+        return len(self.springs)
+
+    def count(self, kind: SpringKind) -> int:
+        return int(np.count_nonzero(self.kind == kind))
+
+
+def in_plane(uv: np.ndarray, plane: str, center=(0.0, 0.0, 0.0)) -> np.ndarray:
+    """(n,3) float64 [m]: 2D points uv (n,2) [m] laid in `plane` (a PLANES name) around `center` [m]."""
+    if plane not in PLANES:
+        raise ValueError(f"plane must be one of {', '.join(PLANES)}, got {plane!r}")
+    a0, a1 = PLANES[plane]
+    uv = np.asarray(uv, dtype=np.float64)
+    positions = np.zeros((len(uv), 3))
+    positions[:, a0], positions[:, a1] = uv[:, 0], uv[:, 1]
+    return positions + np.asarray(center, dtype=np.float64)
+
+
+def spring_arrays(pairs: list[np.ndarray], ks: list[np.ndarray], kinds: list[int], positions, damping_ratio):
+    """(springs (S,2), rest (S,) [m], stiffness (S,) [N/m], damping (S,) [N s/m], kind (S,)) of spring groups:
+    index pairs, their constants [N/m] and kinds; rest lengths from `positions` [m], damping = ratio [s] x k."""
+    springs = np.concatenate(pairs).astype(np.int64)
+    stiffness = np.concatenate(ks).astype(np.float64)
+    kind = np.concatenate([np.full(len(p), kd, np.int64) for p, kd in zip(pairs, kinds)])
+    rest = np.linalg.norm(positions[springs[:, 1]] - positions[springs[:, 0]], axis=1)
+    return springs, rest, stiffness, damping_ratio * stiffness, kind
+
+
+def mesh_cloth(vertices, triangles, material: str | Material = "cotton", source: str = "mesh",
+                  stiffness_rule: str = "edge-area") -> ClothData:
+    """A cloth from any manifold triangle mesh (vertices (V,3) [m], triangles (T,3)).
+
+    Structural springs on every edge; bend springs across every interior edge between its two opposite
+    vertices with k = bend / L0^2; masses density * (adjacent area) / 3. No shear springs: the triangle
+    edges already resist shear. The structural constant follows `stiffness_rule`:
+      "edge-area": k = stretch * A_e / L0^2 (A_e = area of the triangles sharing the edge; Van Gelder);
+      "isotropic": k = sum over the edge's triangles t of 3 E A_t / (sum of t's squared edge lengths),
+                   E = material.sheet_modulus. Every edge of a right isosceles (4-8) or an equilateral
+                   lattice then gets the same constant, which makes the lattice isotropic with Young's
+                   modulus exactly E and Poisson's ratio 1/3 (the Cauchy relation of central springs),
+                   so the 45-degree-rotated odd 4-8 levels are the same material as the even ones.
+    """
+    mat = as_material(material)
+    v = np.asarray(vertices, dtype=np.float64)
+    t = np.asarray(triangles, dtype=np.int64)
+    validate_triangle_mesh(v, t, source)
+    area = triangle_areas(v, t)
+    mass = np.zeros(len(v))
+    np.add.at(mass, t.reshape(-1), np.repeat(area / 3.0, 3))
+    if np.any(mass == 0):
+        raise ValueError(f"{source}: {int(np.sum(mass == 0))} vertices belong to no triangle")
+    mass *= mat.density
+    edges, face_edge, _ = edges_of(t)
+    L = np.linalg.norm(v[edges[:, 1]] - v[edges[:, 0]], axis=1)
+    if stiffness_rule == "edge-area":
+        edge_area = np.zeros(len(edges))
+        np.add.at(edge_area, face_edge.reshape(-1), np.repeat(area, 3))
+        k_edge = mat.stretch * edge_area / L**2
+    elif stiffness_rule == "isotropic":
+        per_triangle = 3.0 * mat.sheet_modulus * area / (L[face_edge] ** 2).sum(axis=1)
+        k_edge = np.zeros(len(edges))
+        np.add.at(k_edge, face_edge.reshape(-1), np.repeat(per_triangle, 3))
+    else:
+        raise ValueError(f"stiffness_rule must be 'edge-area' or 'isotropic', got {stiffness_rule!r}")
+    bend_pairs = interior_edge_opposites(t)
+    Lb = np.linalg.norm(v[bend_pairs[:, 1]] - v[bend_pairs[:, 0]], axis=1) if len(bend_pairs) else np.zeros(0)
+    springs, rest, stiffness, damping, kind = spring_arrays(
+        [edges, bend_pairs], [k_edge, mat.bend / np.maximum(Lb, 1e-12) ** 2],
+        [SpringKind.STRUCTURAL, SpringKind.BEND], v, mat.damping)
+    return ClothData(v, mass, springs, rest, stiffness, damping, kind, t)
