@@ -49,24 +49,23 @@ def run_to_rest(variant: str, base: int, levels: int, start: int, dt_growth: flo
     scene = tc.Scene(cloth, integrator=integrator, dt=1 / 120, integrator_options=options, air_damping=0.5,
                      pins=[PINS[pins]],
                      multilevel=dict(settle, dt_growth=dt_growth), step_guard="off")
+    refiner = scene.controller("refiner")
     for level in range(start, levels):  # compile every kernel once, outside the timing
         scene.step(1)
         if level < levels - 1:
-            scene.refine()
+            scene.apply(refiner.refine())
     scene.reset()
-    trace = [(0.0, scene.level + 1)]
+    trace = [(0.0, refiner.level + 1)]
     t0 = time.perf_counter()
     frames = 0
-    refiner = scene.refiner
     while frames < max_frames and not (refiner.at_finest and refiner.settled):
-        level = scene.level
-        m = scene.step(scene.substeps)
-        refiner.observe(m)
+        level = refiner.level
+        scene.run(1, progress=False)
         frames += 1
-        if scene.level != level:
-            trace.append((time.perf_counter() - t0, scene.level + 1))
+        if refiner.level != level:
+            trace.append((time.perf_counter() - t0, refiner.level + 1))
     wall = time.perf_counter() - t0
-    trace.append((wall, scene.level + 1))
+    trace.append((wall, refiner.level + 1))
     stats = scene.integrator.stats
     return dict(cg_per_step=stats.get("cg_iterations", 0) / max(scene.steps_taken, 1), wall=wall, steps=scene.steps_taken, sim_time=scene.state.t, settled=refiner.settled,
                 switches=[(s.level + 1, s.t) for s in refiner.switches], trace=trace), scene.positions()

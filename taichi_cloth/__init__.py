@@ -17,11 +17,20 @@ from .integrators import INTEGRATORS
 from .material import MATERIALS, Material
 from .model import Model, State
 from .pins import PinSpec
-from .recorder import Recorder
 from .runtime import CompileCounter, init
-from .scene import RunSummary, Scene
+from .scene import Scene
+from .summary import RunSummary
 
 __version__ = "0.1.0"
+
+
+def __getattr__(name: str):
+    # the recorder imports rerun: only when something records (PEP 562)
+    if name == "Recorder":
+        from .recorder import Recorder
+
+        return Recorder
+    raise AttributeError(f"module 'taichi_cloth' has no attribute {name!r}")
 
 
 def load_scene(source, **overrides):

@@ -38,6 +38,9 @@ from dataclasses import dataclass, fields
 
 import taichi as ti
 
+from clothbase.fields import FieldBlock
+
+from .clock import frame_steps
 from .stability import stable_dt
 
 
@@ -96,65 +99,65 @@ def step_cap(bound: float | None, options: AdaptiveOptions, dt_max: float) -> fl
     return min(max(options.safety * bound, options.dt_min), dt_max)
 
 
-def frame_steps(h: float, frame_time: float) -> tuple[int, float]:
-    """(substeps, dt): the fewest equal steps dt <= h [s] that fill one frame of frame_time [s]."""
-    # the 1e-9 keeps a step that divides the frame exactly from gaining a substep by rounding
-    n = max(1, math.ceil(frame_time / h * (1.0 - 1e-9)))
-    return n, frame_time / n
-
-
 @ti.data_oriented
 class AdaptiveStep:
-    """Chooses the scene's step (see the module docstring). Built by Scene for dt = "auto" only.
+    """The automatic step clock (see the module docstring and taichi_cloth.clock for the interface). Built for
+    dt = "auto" only.
 
+    model, state, forces: the scene's; integrator_cls: the integrator class (its stable step); fps: frames per
+    simulated second; thickness: the thinnest collider's thickness [m] (None: no colliders, no motion rule).
     bound:      the current stable step [s] (None: unconditionally stable)
     cap:        clamp(safety x bound, dt_min, dt_max) [s]
     dt, substeps: the current plan: dt [s] = frame time / substeps
     halvings, regrowths, rollbacks: how often each rule fired since the last reset
+    warnings:   lines for the run summary (a bound below dt_min)
     """
 
-    def __init__(self, scene, options: AdaptiveOptions):
-        self.scene, self.options = scene, options
-        self.frame_time = 1.0 / scene.fps
+    auto = True
+
+    def __init__(self, model, state, forces, integrator_cls, fps: float, options: AdaptiveOptions,
+                 thickness: float | None = None):
+        self.model, self.state, self.forces = model, state, forces
+        self.cls, self.options = integrator_cls, options
+        self.frame_time = 1.0 / fps
         self.dt_max = min(options.dt_max or self.frame_time, self.frame_time)
         if self.dt_max <= options.dt_min:
             raise ValueError(f"adaptive dt_min = {options.dt_min:g} s must be below the frame time "
                              f"{self.frame_time:.4g} s (and dt_max)")
-        thickness = [c.thickness for c in scene.colliders if getattr(c, "thickness", None)]
         #: [m] the largest move per step the motion rule allows (None: no colliders, no motion rule)
-        self.max_move = options.motion * min(thickness) if thickness else None
+        self.max_move = options.motion * thickness if thickness else None
+        self.warnings: list[str] = []
         self._key = None
         self._x0 = self._v0 = None
-        self._n = scene.model.n_particles  # 0-d i32 field: the live particle count
-        self.cls = type(scene.integrator)
+        self._n = model.n_particles  # 0-d i32 field: the live particle count
         self.reset()
 
     # ------------------------------------------------------------------ the bound
     def _model_key(self) -> tuple:
         """What the bound depends on. Holding the arrays themselves (not ids) makes `is` exact."""
-        m, f = self.scene.model, self.scene.forces
+        m = self.model
         d = m.data
-        return (d, d.stiffness, d.damping, d.mass, m.pinned, int(m.pinned.sum()), f.air_damping_value)
+        return (d, d.stiffness, d.damping, d.mass, m.pinned, int(m.pinned.sum()), self.forces.air_damping_value)
 
     def _same_model(self, key) -> bool:
         return self._key is not None and all(a is b if not isinstance(a, (int, float)) else a == b
                                              for a, b in zip(key, self._key))
 
-    def refresh(self) -> bool:
+    def _refresh_bound(self) -> bool:
         """Recompute the bound if the model changed since the last call; True if it did. A new model also drops
         the rollback limit (it was about the old model)."""
         key = self._model_key()
         if self._same_model(key):
             return False
         self._key = key
-        self.bound = stable_dt(self.cls, self.scene.model, self.scene.forces.air_damping_value)
+        self.bound = stable_dt(self.cls, self.model, self.forces.air_damping_value)
         self.cap = self.step_for(self.bound)
         self.limit = math.inf
         if self.bound is not None and self.options.safety * self.bound < self.options.dt_min:
             msg = (f"dt = auto: {self.options.safety:g} x the stable step {self.bound:.3g} s is below dt_min = "
                    f"{self.options.dt_min:.3g} s; stepping at dt_min, above the linear-theory bound")
-            if msg not in self.scene.warnings:
-                self.scene.warnings.append(msg)
+            if msg not in self.warnings:
+                self.warnings.append(msg)
         return True
 
     def step_for(self, bound: float | None) -> float:
@@ -170,15 +173,24 @@ class AdaptiveStep:
         self.calm = 0
         self.halvings = self.regrowths = self.rollbacks = 0
         self.refresh()
-        self.plan()
 
-    def plan(self) -> int:
-        """Set the scene's dt for the next frame (or step() call); returns the substeps per frame."""
-        self.refresh()
+    def refresh(self) -> None:
+        """Plan dt for the next frame (or Scene.step call); cheap unless the model changed."""
+        self._refresh_bound()
         h = max(min(self.cap, self.motion_dt, self.limit), self.options.dt_min)
         self.substeps, self.dt = frame_steps(h, self.frame_time)
-        self.scene._dt = self.dt
-        return self.substeps
+
+    def frame(self) -> tuple[int, float]:
+        self.refresh()
+        return self.substeps, self.dt
+
+    def set_dt(self, dt: float) -> None:
+        """The step is managed: a request only re-plans it."""
+        self.refresh()
+
+    def model_changed(self, scale: float | None) -> None:
+        """A new model: re-plan (the bound follows the model, not a level's scale)."""
+        self.refresh()
 
     def observe(self, max_speed: float, steps: int) -> None:
         """After `steps` steps ending at frame-end max speed `max_speed` [m/s]: the motion rule (halve when a
@@ -204,20 +216,18 @@ class AdaptiveStep:
                 self.motion_dt, self.calm = math.inf, 0
 
     # ------------------------------------------------------------------ rollback
-    def save(self) -> None:
-        """Keep x and v of the frame start (capacity-sized fields, allocated on first use)."""
+    def start_frame(self) -> None:
+        """Keep x, v and t of the frame start (capacity-sized fields, allocated on first use)."""
         if not self.options.rollback:
             return
-        s = self.scene.state
+        s = self.state
         if self._x0 is None:
-            from clothbase.fields import FieldBlock
-
             blk = FieldBlock()
-            self._x0 = blk.vector(3, self.scene.model.fp, self.scene.model.capacity[0])
-            self._v0 = blk.vector(3, self.scene.model.fp, self.scene.model.capacity[0])
+            self._x0 = blk.vector(3, self.model.fp, self.model.capacity[0])
+            self._v0 = blk.vector(3, self.model.fp, self.model.capacity[0])
             blk.finalize(self)
         self._copy(self._x0, s.x, self._v0, s.v)
-        self._saved = (s.t, self.scene.steps_taken)
+        self._t0 = s.t
 
     @ti.kernel
     def _copy(self, x_to: ti.template(), x_from: ti.template(), v_to: ti.template(), v_from: ti.template()):
@@ -226,14 +236,13 @@ class AdaptiveStep:
             v_to[i] = v_from[i]
 
     def roll_back(self) -> bool:
-        """Restore the frame start and halve the step (it stays at most that until the model changes). False
-        when rollback is off or the halved step would fall below dt_min: the blow-up stands."""
+        """Restore the frame start (x, v, t) and halve the step (it stays at most that until the model changes).
+        False when rollback is off or the halved step would fall below dt_min: the blow-up stands."""
         if not self.options.rollback or self._x0 is None or self.dt * 0.5 < self.options.dt_min:
             return False
-        s = self.scene.state
+        s = self.state
         self._copy(s.x, self._x0, s.v, self._v0)
-        s.t, self.scene.steps_taken = self._saved
-        self.scene.integrator.reset()  # any history (warm starts) belongs to the discarded steps
+        s.t = self._t0
         self.limit = 0.5 * self.dt
         self.calm = 0
         self.rollbacks += 1

@@ -78,7 +78,7 @@ def run_scene_file(scene_path, args, recorder=None, entity=None, translation=Non
             rec.close()
     if not quiet:
         print(summary.format())
-        if scene.garment is not None:
+        if scene.controller("sewing") is not None:
             from .garment.metrics import garment_quality
 
             print(garment_quality(scene).format())

@@ -11,6 +11,8 @@ Spec keys (SI units):
   {"type": "standin"}: seed 002's sphere-collider body, a sphere-and-capsule stand-in for the mannequin
   every type also takes "thickness" [m] (default 0.003) and "friction" (default 0.3).
 Analytic shapes with the same thickness and friction share one PrimitiveColliders (one kernel).
+`Colliders` is the scene's controller: every collider remembers where the particles start a step, and after the
+step (and the other controllers) pushes them out, writing the contact normals the implicit integrators filter.
 """
 from __future__ import annotations
 
@@ -18,6 +20,8 @@ from pathlib import Path
 
 from clothbase.meshes import load_triangle_mesh
 from collision import MeshCollider, PrimitiveColliders
+
+from .control import Controller
 
 DEFAULT_THICKNESS = 0.003  # m
 DEFAULT_FRICTION = 0.3
@@ -75,3 +79,50 @@ def build_colliders(specs, base_dir: Path | None = None) -> list:
     for (thickness, friction), g in groups.items():
         out.append(PrimitiveColliders(g["sphere"], g["capsule"], g["plane"], thickness=thickness, friction=friction))
     return out
+
+
+class Colliders(Controller):
+    """The scene's colliders, resolved after every step in order (self-collision first, so that the bodies have
+    the last word on every position). objects: collision objects (MeshCollider, PrimitiveColliders,
+    SelfCollision); contacts: the scene's Contacts, whose normals they write.
+
+    moving: indices of the objects whose surface moves during a run (a morphing body): the recorder logs them on
+    the timeline instead of once
+    """
+
+    name = "colliders"
+
+    def __init__(self, model, state, objects: list, contacts):
+        self.objects, self.contacts = list(objects), contacts
+        self.moving: set[int] = set()
+        for c in self.objects:
+            c.attach(state.x, state.v, model.inv_mass, model.n_particles, contacts.normal)
+
+    @property
+    def thickness(self) -> float | None:
+        """The thinnest collider's thickness [m] (None if none has one)."""
+        values = [c.thickness for c in self.objects if getattr(c, "thickness", None)]
+        return min(values) if values else None
+
+    @property
+    def bodies(self) -> list:
+        """The mesh colliders (bodies)."""
+        return [c for c in self.objects if isinstance(c, MeshCollider)]
+
+    @property
+    def repulsions(self) -> list:
+        """The force sources of the mesh colliders that push the cloth off from a distance."""
+        return [r for r in (getattr(c, "repulsion", None) for c in self.objects) if r is not None]
+
+    def before_step(self, t: float, dt: float) -> None:
+        for c in self.objects:
+            c.begin_step()
+
+    def after_step(self, t: float, dt: float) -> None:
+        self.contacts.clear()
+        for c in self.objects:
+            c.resolve(dt)
+
+    def layout(self, layout) -> None:
+        for k, c in enumerate(self.objects):
+            layout.colliders.append(dict(c.describe(), moving=k in self.moving))

@@ -96,7 +96,7 @@ class Model:
         self.data = data
         self.pinned = np.zeros(P, dtype=bool)
         self.n_particles[None], self.n_springs[None], self.n_triangles[None] = P, S, T
-        npfp = self._npfp
+        npfp = self.np_dtype
         _fill(self.rest_x, data.positions.astype(npfp))
         _fill(self.mass, data.mass.astype(npfp))
         _fill(self.inv_mass, (1.0 / data.mass).astype(npfp))
@@ -127,7 +127,7 @@ class Model:
             raise ValueError(f"pin index out of range 0..{self.data.n_particles - 1}")
         self.pinned[idx] = True
         inv = np.where(self.pinned, 0.0, 1.0 / self.data.mass)
-        _fill(self.inv_mass, inv.astype(self._npfp))
+        _fill(self.inv_mass, inv.astype(self.np_dtype))
 
     def set_stiffness(self, stiffness) -> None:
         """Replace the spring constants [N/m] (scalar or (S,)); kernels read the field, nothing recompiles.
@@ -136,9 +136,9 @@ class Model:
         k = np.broadcast_to(np.asarray(stiffness, dtype=np.float64), k_old.shape).copy()
         ratio = np.divide(self.data.damping, k_old, out=np.zeros_like(k_old), where=k_old > 0)
         self.data.stiffness, self.data.damping = k, ratio * k
-        _fill(self.stiffness, k.astype(self._npfp))
-        _fill(self.stiffness_sum, self.stiffness_sum_np().astype(self._npfp))
-        _fill(self.damping, self.data.damping.astype(self._npfp))
+        _fill(self.stiffness, k.astype(self.np_dtype))
+        _fill(self.stiffness_sum, self.stiffness_sum_np().astype(self.np_dtype))
+        _fill(self.damping, self.data.damping.astype(self.np_dtype))
 
     def set_mass(self, mass) -> None:
         """Replace the particle masses [kg] (scalar or (P,)); pins are kept."""
@@ -146,11 +146,12 @@ class Model:
         if np.any(m <= 0):
             raise ValueError("every particle needs a positive mass")
         self.data.mass = m
-        _fill(self.mass, m.astype(self._npfp))
-        _fill(self.inv_mass, np.where(self.pinned, 0.0, 1.0 / m).astype(self._npfp))
+        _fill(self.mass, m.astype(self.np_dtype))
+        _fill(self.inv_mass, np.where(self.pinned, 0.0, 1.0 / m).astype(self.np_dtype))
 
     @property
-    def _npfp(self):
+    def np_dtype(self):
+        """The numpy dtype of the fields (float32 or float64)."""
         return np.float32 if self.precision == "f32" else np.float64
 
     # ------------------------------------------------------------------ host-side derived quantities
@@ -222,9 +223,13 @@ class State:
 
     def reset(self) -> None:
         """Back to the rest positions, zero velocity, t = 0."""
+        self.to_rest()
+        self.t = 0.0
+
+    def to_rest(self) -> None:
+        """Every particle at its rest position with zero velocity (t unchanged)."""
         self.x.copy_from(self.model.rest_x)
         self.v.fill(0)
-        self.t = 0.0
 
     def positions(self) -> np.ndarray:
         """(P,3) float64 copy of the live positions [m]."""
@@ -238,4 +243,4 @@ class State:
         """Overwrite positions [m] and/or velocities [m/s] ((P,3) arrays)."""
         for f, val in ((self.x, x), (self.v, v)):
             if val is not None:
-                _fill(f, np.asarray(val, dtype=self.model._npfp))
+                _fill(f, np.asarray(val, dtype=self.model.np_dtype))

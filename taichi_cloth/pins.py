@@ -2,7 +2,9 @@
 
 Selection is a predicate on rest positions (indices, nearest-to-points, or a box), so it can be
 re-applied to a refined mesh. A fixed pin is just inverse mass 0 and costs nothing per step; only a
-scene with a moving pin builds the PinDriver and compiles its kernel.
+scene with a moving pin builds the PinDriver and compiles its kernel. `Pins` is the scene's controller: it pins
+the selected particles of whatever cloth the model holds (again after a level switch or a seam merge) and moves
+the moving groups after every step.
 """
 
 from dataclasses import dataclass
@@ -10,7 +12,10 @@ from typing import Callable, Sequence
 
 import numpy as np
 import taichi as ti
+
 from clothbase.fields import FieldBlock
+
+from .control import Controller
 
 
 class KeyframePath:
@@ -106,7 +111,7 @@ class PinDriver:
         pad = self.capacity - self.n
         self.pin_index.from_numpy(np.pad(idx, (0, pad)))
         self.pin_group.from_numpy(np.pad(grp, (0, pad)))
-        origin = self.model.data.positions[idx].astype(self.model._npfp)
+        origin = self.model.data.positions[idx].astype(self.model.np_dtype)
         self.pin_origin.from_numpy(np.pad(origin, ((0, pad), (0, 0))))
 
     def apply(self, t: float, dt: float | None) -> None:
@@ -130,3 +135,66 @@ class PinDriver:
     def positions(self) -> np.ndarray:
         """(N,3) current positions of the moving pins [m]."""
         return self.state.positions()[self.pin_index.to_numpy()[: self.n]]
+
+
+def pinned_mask(specs: Sequence[PinSpec], rest_positions: np.ndarray) -> np.ndarray:
+    """(P,) bool: the particles (of a cloth with these rest positions [m]) that any of `specs` pins."""
+    pinned = np.zeros(len(rest_positions), dtype=bool)
+    for spec in specs:
+        pinned[spec.select(rest_positions)] = True
+    return pinned
+
+
+class Pins(Controller):
+    """The scene's pins: every PinSpec selects particles on the current cloth's rest positions; their inverse mass
+    is 0. Groups with a path move after every step (a PinDriver, built only when one has a path). `capacity`: the
+    most moving particles any cloth of the scene may select (a multilevel cloth's finest level).
+
+    indices: (N,) int64 the pinned particles of the current cloth
+    """
+
+    name = "pins"
+
+    def __init__(self, model, state, specs: Sequence[PinSpec], capacity: int | None = None):
+        self.model, self.state = model, state
+        self.specs = list(specs)
+        moving = [s for s in self.specs if s.path is not None]
+        self.driver = None
+        if moving:
+            groups = [(s.select(model.data.positions), s.path) for s in moving]
+            self.driver = PinDriver(model, state, groups, capacity)
+        self._select()
+        self._place(0.0, None)
+
+    @property
+    def moving(self) -> bool:
+        return self.driver is not None
+
+    def _select(self) -> None:
+        rest = self.model.data.positions
+        groups = [(spec.select(rest), spec) for spec in self.specs]
+        self.model.pin(np.concatenate([idx for idx, _ in groups]) if groups else [])
+        if self.driver is not None:
+            self.driver.load([idx for idx, spec in groups if spec.path is not None])
+        self.indices = np.nonzero(self.model.pinned)[0]
+
+    def _place(self, t: float, dt: float | None) -> None:
+        if self.driver is not None:
+            self.driver.apply(t, dt)
+
+    def after_step(self, t: float, dt: float) -> None:
+        if self.driver is not None:
+            self.driver.apply(t, dt)
+
+    def model_changed(self, change, t: float, dt: float) -> None:
+        if change.refills:
+            self._select()
+        self._place(t, dt)
+
+    def reset(self):
+        self._place(0.0, None)
+        return None
+
+    def record(self, frame) -> None:
+        if len(self.indices):
+            (frame.points if self.driver is not None else frame.fixed_points)["pins"] = frame.positions[self.indices]

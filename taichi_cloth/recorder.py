@@ -1,12 +1,12 @@
 """Recorder: every Rerun call of the engine lives here (rerun-sdk 0.41).
 
-One explicit RecordingStream saved to an .rrd file as it goes (so a run that fails midway keeps what
-it recorded). The mesh topology is logged once as static data (for a multilevel cloth: on the timeline,
-again at every level switch, with a metrics/<entity>/level series and an event; for a garment, again when its
-seams merge); each frame logs only the vertex positions and normals (Rerun's partial-update pattern), and for a
-garment the strain map as vertex colours and the seam gap (metrics/<entity>/seam_gap, mm). Timelines: "frame" (sequence) and
-"sim_time" (duration, s). Scalars live under metrics/<entity>/...: energy (three series: kinetic,
-potential, total [J]), strain/max, perf/steps_per_s. Open a recording with `rerun FILE.rrd`.
+One explicit RecordingStream saved to an .rrd file as it goes (so a run that fails midway keeps what it recorded).
+A recorder is given plain data, never a scene: a SceneLayout once per cloth and a FrameSnapshot per recorded frame
+(taichi_cloth.frame). The mesh topology is logged once as static data, or on the timeline whenever the snapshot's
+topology version changes (a level switch, merged seams); each frame logs only the vertex positions, normals and
+colours (Rerun's partial-update pattern), the scalars and the events. Timelines: "frame" (sequence) and "sim_time"
+(duration, s). Scalars live under metrics/<entity>/...: energy (kinetic, potential, total [J]), strain/max, level,
+seam_gap [mm], perf/steps_per_s. Open a recording with `rerun FILE.rrd`.
 """
 from __future__ import annotations
 
@@ -15,12 +15,24 @@ from pathlib import Path
 import numpy as np
 import rerun as rr
 
-from .garment.metrics import strain_colors, vertex_strain
+from .strain import strain_colors
 
 CLOTH_COLOR = (200, 90, 60, 255)
 PIN_COLOR = (30, 30, 30, 255)
 BODY_COLOR = (170, 170, 180, 255)
 FLOOR_COLOR = (120, 140, 120, 255)
+
+
+def free_path(path: str | Path) -> Path:
+    """`path` if no file is there yet, else the first free `stem-2.suffix`, `stem-3.suffix`... beside it (runs never
+    overwrite an earlier recording)."""
+    path = Path(path)
+    k = 2
+    candidate = path
+    while candidate.exists():
+        candidate = path.with_name(f"{path.stem}-{k}{path.suffix}")
+        k += 1
+    return candidate
 
 
 def _quaternion_z_to(direction) -> list:
@@ -37,11 +49,16 @@ def _quaternion_z_to(direction) -> list:
 
 
 class Recorder:
-    """Writes one .rrd file. `path` is created (with its folder); `application_id` names the app in the viewer."""
+    """Writes one .rrd file at `path` (its folder is created); `application_id` names the app in the viewer. An
+    existing file is kept: the recording goes to the first free `NAME-2.rrd`, `NAME-3.rrd`... unless `overwrite`;
+    `path` says where it went."""
 
-    def __init__(self, path: str | Path, application_id: str = "taichi_cloth", recording_name: str | None = None):
-        self.path = Path(path)
+    def __init__(self, path: str | Path, application_id: str = "taichi_cloth", recording_name: str | None = None,
+                 overwrite: bool = False):
+        self.path = Path(path) if overwrite else free_path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._versions: dict[str, int] = {}  # entity -> the topology version it logged last
+        self._static_topology: dict[str, bool] = {}  # entity -> its triangles never change
         self.stream = rr.RecordingStream(application_id)
         self.stream.save(str(self.path))
         if recording_name:
@@ -49,42 +66,18 @@ class Recorder:
         self.frames_logged = 0
 
     # ------------------------------------------------------------------ cloth
-    def begin_cloth(self, entity: str, scene, translation=None) -> None:
-        """Log what does not change: topology, colour, fixed pins, an optional placement of the entity."""
+    def begin_cloth(self, entity: str, layout, translation=None) -> None:
+        """What does not change during a run of the cloth `entity` (a SceneLayout): series names, colliders, and an
+        optional placement [m] of the entity in the viewer."""
         rec = self.stream
         if translation is not None:
             rec.log(entity, rr.Transform3D(translation=np.asarray(translation, np.float32)), static=True)
-        rec.log(f"metrics/{entity}/energy", rr.SeriesLines(names=["kinetic", "potential", "total"]), static=True)
-        if not scene.topology_changes:
-            self._log_topology(entity, scene, static=True)
-        else:  # the topology changes at each level switch or seam merge: log it on the timeline
-            if scene.refiner is not None:
-                rec.log(f"metrics/{entity}/level", rr.SeriesLines(names="level"), static=True)
-            self.log_topology(entity, scene, 0)
-        if scene.sewing is not None:
-            rec.log(f"metrics/{entity}/seam_gap", rr.SeriesLines(names=["max [mm]", "mean [mm]"]), static=True)
-
-    def log_topology(self, entity: str, scene, frame: int, message: str | None = None) -> None:
-        """The cloth's triangles (and fixed pins) as of `frame`: logged at a multilevel switch or a seam merge,
-        with an event saying what changed (default: the level)."""
-        self.stream.set_time("frame", sequence=frame)
-        self.stream.set_time("sim_time", duration=scene.state.t)
-        self._log_topology(entity, scene, static=False)
-        if frame > 0:
-            if message is None:
-                message = (f"level {scene.level + 1}: {scene.model.data.n_particles} particles, "
-                           f"{scene.model.data.n_springs} springs")
-            self.log_event(entity, scene, frame, message, level="INFO")
-
-    def _log_topology(self, entity: str, scene, static: bool) -> None:
-        rec = self.stream
-        tri = scene.model.data.triangles
-        if len(tri):
-            rec.log(f"{entity}/mesh", rr.Mesh3D.from_fields(triangle_indices=tri.astype(np.uint32),
-                                                            albedo_factor=CLOTH_COLOR), static=static)
-        if len(scene.pinned_indices) and scene.pins is None:
-            rec.log(f"{entity}/pins", rr.Points3D(scene.model.data.positions[scene.pinned_indices].astype(np.float32),
-                                                  radii=0.01, colors=PIN_COLOR), static=static)
+        for path, names in layout.series.items():
+            rec.log(f"metrics/{entity}/{path}", rr.SeriesLines(names=names), static=True)
+        self._static_topology[entity] = not layout.topology_changes
+        self._versions.pop(entity, None)
+        for k, description in enumerate(layout.colliders):
+            self.log_collider(f"{entity}/colliders/{k}", description, static=not description.get("moving", False))
 
     def log_collider(self, entity: str, description: dict, static: bool = True) -> None:
         """A collider, once, as static data: a body mesh, spheres, capsules and planes (a 4 m square). A body that
@@ -117,46 +110,45 @@ class Recorder:
                                                       triangle_indices=np.array([[0, 1, 2], [0, 2, 3]], np.uint32),
                                                       albedo_factor=FLOOR_COLOR), static=True)
 
-    def log_frame(self, entity: str, scene, frame: int, measurement, steps_per_s: float | None = None) -> None:
-        """Log the cloth's state at `frame` (positions, normals, moving pins) and its scalar metrics."""
+    def log_frame(self, entity: str, frame) -> None:
+        """Log a FrameSnapshot of the cloth `entity`: the topology when its version is new, positions, normals,
+        colours, points (pins), moved collider vertices, scalars and events."""
         rec = self.stream
-        rec.set_time("frame", sequence=frame)
-        rec.set_time("sim_time", duration=scene.state.t)
-        if len(scene.model.data.triangles):
-            x, normals = scene.surface()
-            colors = None
-            if scene.garment is not None:  # the strain map of a garment
-                colors = strain_colors(vertex_strain(scene.model.data, x))
-            rec.log(f"{entity}/mesh", rr.Mesh3D.from_fields(vertex_positions=x, vertex_normals=normals,
-                                                            vertex_colors=colors))
+        rec.set_time("frame", sequence=frame.frame)
+        rec.set_time("sim_time", duration=frame.t)
+        triangles = len(frame.triangles) > 0
+        if self._versions.get(entity) != frame.topology_version:
+            static = self._static_topology.get(entity, True)
+            if triangles:
+                rec.log(f"{entity}/mesh", rr.Mesh3D.from_fields(
+                    triangle_indices=np.asarray(frame.triangles, np.uint32), albedo_factor=CLOTH_COLOR), static=static)
+            for name, points in frame.fixed_points.items():
+                rec.log(f"{entity}/{name}", rr.Points3D(np.asarray(points, np.float32), radii=0.01, colors=PIN_COLOR),
+                        static=static)
+            self._versions[entity] = frame.topology_version
+        if triangles:
+            rec.log(f"{entity}/mesh", rr.Mesh3D.from_fields(vertex_positions=frame.positions,
+                                                            vertex_normals=frame.normals, vertex_colors=frame.colors))
         else:
-            x = scene.positions().astype(np.float32)
-            rec.log(f"{entity}/particles", rr.Points3D(x, radii=0.005, colors=CLOTH_COLOR))
-        if scene.pins is not None:
-            rec.log(f"{entity}/pins", rr.Points3D(x[scene.pinned_indices], radii=0.01, colors=PIN_COLOR))
-        morph = scene.body_morph
-        if morph is not None and morph.changed:  # the body moved: its new vertex positions only
-            rec.log(f"{entity}/colliders/{scene.body_collider_index}",
-                    rr.Mesh3D.from_fields(vertex_positions=morph.vertices.astype(np.float32)))
-            morph.changed = False
-        m = measurement
+            rec.log(f"{entity}/particles", rr.Points3D(frame.positions, radii=0.005, colors=CLOTH_COLOR))
+        for name, points in frame.points.items():
+            rec.log(f"{entity}/{name}", rr.Points3D(np.asarray(points, np.float32), radii=0.01, colors=PIN_COLOR))
+        for k, vertices in frame.meshes.items():
+            rec.log(f"{entity}/colliders/{k}", rr.Mesh3D.from_fields(vertex_positions=vertices))
         metrics = f"metrics/{entity}"
-        rec.log(f"{metrics}/energy", rr.Scalars([m.kinetic, m.potential, m.total]))
-        rec.log(f"{metrics}/strain/max", rr.Scalars(m.max_strain))
-        if scene.refiner is not None:
-            rec.log(f"{metrics}/level", rr.Scalars(scene.level + 1))
-        if scene.sewing is not None:
-            gaps = scene.sewing.gaps(x.astype(np.float64))
-            rec.log(f"{metrics}/seam_gap", rr.Scalars([1e3 * gaps.max(), 1e3 * gaps.mean()] if len(gaps) else [0.0, 0.0]))
-        if steps_per_s is not None:
-            rec.log(f"{metrics}/perf/steps_per_s", rr.Scalars(steps_per_s))
+        for path, value in frame.scalars.items():
+            rec.log(f"{metrics}/{path}", rr.Scalars(value))
+        self.log_events(entity, frame.frame, frame.t, frame.events)
         self.frames_logged += 1
 
-    def log_event(self, entity: str, scene, frame: int, text: str, level: str = "ERROR") -> None:
-        """A text event (e.g. a blow-up report) at `frame`."""
+    def log_events(self, entity: str, frame: int, t: float, events) -> None:
+        """Text events ((level, text) pairs: "INFO", "WARN", "ERROR") at `frame`, simulated time t [s]."""
+        if not events:
+            return
         self.stream.set_time("frame", sequence=frame)
-        self.stream.set_time("sim_time", duration=scene.state.t)
-        self.stream.log(f"{entity}/events", rr.TextLog(text, level=level))
+        self.stream.set_time("sim_time", duration=t)
+        for level, text in events:
+            self.stream.log(f"{entity}/events", rr.TextLog(text, level=level))
 
     def log_flat_pieces(self, entity: str, pieces, layouts=None, translation=(0.0, 0.0, 0.0), gap: float = 0.05,
                         full_scale: float = 0.05) -> None:

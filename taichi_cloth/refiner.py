@@ -1,10 +1,10 @@
 """Coarse-to-fine simulation (seed 000 section 2.2): run a coarse 4-8 level until the drape settles, then
 switch to the next level, until the finest.
 
-A switch refills the Model's fields (allocated at the finest capacity) with the next level's particles and
-springs, prolongs positions and velocities to the new vertices in one Taichi kernel (multilevel.prolong),
-re-applies the pins to the new rest coordinates and tells the integrator and constraints that the topology
-changed. Nothing is recompiled. Built only when the scene's cloth is a MultilevelCloth.
+A switch is a ModelChange (taichi_cloth.control) that the scene applies: the Model's fields (allocated at the
+finest capacity) are refilled with the next level's particles and springs, positions and velocities are prolonged
+to the new vertices in one Taichi kernel (multilevel.prolong), and the pins, the integrator and the constraints
+follow. Nothing is recompiled. Built only when the scene's cloth is a MultilevelCloth.
 
 Refinement is global (every triangle bisected: the next level of the hierarchy) or local: only the
 triangles whose dihedral angle across the hypotenuse exceeds `angle` degrees, or that touch a collider,
@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .diagnostics import Measurement
+from .control import Controller, FrameInfo, ModelChange
 
 
 @dataclass(frozen=True)
@@ -57,19 +57,24 @@ class LevelSwitch:
     steps: int
 
 
-class Refiner:
-    """Owns the level schedule of a scene whose cloth is a MultilevelCloth.
+class Refiner(Controller):
+    """The level schedule of a scene whose cloth is a MultilevelCloth (a controller).
 
-    level:    the current level (0-based; the seed's N = level + 1)
+    model, state: the scene's; contacts: its Contacts (or None: no colliders); cloth: the MultilevelCloth;
+    gravity: (3,) [m/s^2] for the energy scale of the settle criterion.
+    level:    the current level (0-based; the first paper's N = level + 1)
     switches: the LevelSwitch history (the start level first)
     settled:  whether the settle criterion held at the last observed frame
     """
 
-    def __init__(self, scene, cloth, settle: SettleCriterion | None = None, refine: bool | str = True,
-                 dt_growth: float = 1.0, angle: float = 20.0):
+    name = "refiner"
+    changes_topology = True
+
+    def __init__(self, model, state, contacts, cloth, settle: SettleCriterion | None = None,
+                 refine: bool | str = True, dt_growth: float = 1.0, angle: float = 20.0, gravity=(0.0, -9.81, 0.0)):
         from multilevel.prolong import Prolongation
 
-        self.scene, self.cloth = scene, cloth
+        self.model, self.state, self.contacts, self.cloth = model, state, contacts, cloth
         self.settle = settle or SettleCriterion()
         mode = {True: "global", False: "none"}.get(refine, refine)
         if mode not in ("global", "local", "none"):
@@ -87,90 +92,104 @@ class Refiner:
         # the scene's dt belongs to the finest level; a coarser level may step dt_growth times larger per
         # level (the edge length grows by sqrt(2) per level, and with it the explicit step limit)
         self.dt_growth = float(dt_growth)
-        self.finest_dt = scene.dt
-        self.prolongation = Prolongation(cloth.capacity[0], scene.model.fp)
+        self.prolongation = Prolongation(cloth.capacity[0], model.fp)
         finest = cloth.levels[-1]
         diameter = float(np.linalg.norm(np.ptp(finest.positions, axis=0)))
-        self.energy_scale = max(float(finest.mass.sum()) * float(np.linalg.norm(scene.forces.gravity_value))
-                                * diameter, 1e-12)
-        self.reset()
+        self.energy_scale = max(float(finest.mass.sum()) * float(np.linalg.norm(gravity)) * diameter, 1e-12)
+        self._steps = 0
+        self._restart()
 
-    def reset(self) -> None:
-        """Back to the start level (the model is refilled; the caller resets the state)."""
+    def _restart(self) -> None:
         self.level = self.cloth.start_level
         self.mesh = self.cloth.hierarchy.levels[self.level]  # the current Level (uv, triangles)
-        self._depth = np.full(self.mesh.n_triangles, self.level, np.int64)
+        self.depth = np.full(self.mesh.n_triangles, self.level, np.int64)
         self._exhausted = False
         self._energies: list[float] = []
-        self._level_t0 = self.scene.state.t
+        self._level_t0 = 0.0
+        self._steps = 0
         self.settled = False
-        if self.scene.model.data is not self.cloth.levels[self.level]:
-            self.scene._load_level(self.cloth.levels[self.level])
-        self._set_dt()
-        self.switches = [LevelSwitch(self.level, self.scene.state.t, self.scene.steps_taken)]
+        self.switches = [LevelSwitch(self.level, 0.0, 0)]
 
-    def level_dt(self, level: int) -> float:
-        """The time step [s] used on `level`."""
-        return self.finest_dt * self.dt_growth ** (self.cloth.n_levels - 1 - level)
+    def reset(self) -> ModelChange | None:
+        """Back to the start level (the model is refilled with it, the state at its rest shape)."""
+        self._restart()
+        data = self.cloth.levels[self.level]
+        if self.model.data is data:
+            return None
+        return ModelChange(data=data, rest=True, level=self.level,
+                           dt_scale=self.dt_scale(self.level), topology=True)
 
-    def _set_dt(self) -> None:
-        self.scene.dt = self.level_dt(self.level)
+    def dt_scale(self, level: int) -> float:
+        """The step on `level` as a multiple of the finest level's step: dt_growth per level below the finest."""
+        return self.dt_growth ** (self.cloth.n_levels - 1 - level)
 
     @property
     def at_finest(self) -> bool:
         """No further refinement: the finest level (global), or nothing left to refine (local)."""
         return self.level == self.cloth.n_levels - 1 or self._exhausted
 
-    def observe(self, m: Measurement) -> bool:
-        """Feed one frame's measurement; refine when the level has settled (or used its time budget).
-        Returns True when the level changed."""
+    def after_frame(self, frame: FrameInfo) -> ModelChange | None:
+        """Feed one frame's measurement; refine when the level has settled (or used its time budget)."""
+        m = frame.measurement
+        self._steps = frame.steps
         self._energies.append(m.total)
         w = self.settle.window
         self.settled = (len(self._energies) > w and m.max_speed < self.settle.max_speed
                         and abs(self._energies[-1] - self._energies[-1 - w]) < self.settle.energy_change * self.energy_scale)
         if self.at_finest or not self.refine_enabled:
-            return False
+            return None
         overdue = (self.settle.max_time is not None
-                   and self.scene.state.t - self._level_t0 >= self.settle.max_time - 1e-12)
+                   and frame.t - self._level_t0 >= self.settle.max_time - 1e-12)
         if self.settled or overdue:
-            self.refine()
-            return True
-        return False
+            return self.refine()
+        return None
 
-    def refine(self) -> None:
-        """Switch to the next level now: refill the fields, prolong x and v to the new vertices."""
+    def refine(self) -> ModelChange | None:
+        """The switch to the next level, now (apply it with Scene.apply): the next level's cloth, x and v prolonged
+        to the new vertices. None when a local refinement found nothing to refine (this is the finest the drape
+        needs)."""
         if self.at_finest:
             raise ValueError("the cloth is already at its finest level")
-        scene = self.scene
-        n_old = scene.model.data.n_particles
+        n_old = self.model.data.n_particles
         if self.mode == "local":
             from multilevel.hierarchy import refine_local
 
-            mesh, self._depth = refine_local(self.mesh.uv, self.mesh.triangles, self.marked(), self._depth,
-                                             self.cloth.n_levels - 1)
+            mesh, depth = refine_local(self.mesh.uv, self.mesh.triangles, self.marked(), self.depth,
+                                       self.cloth.n_levels - 1)
             if mesh.n_vertices == n_old:
-                self._exhausted = True  # nothing called for refinement: this is the finest the drape needs
-                return
+                self._exhausted = True
+                return None
+            self.depth = depth
             data = self.cloth.build(mesh)
         else:
             mesh = self.cloth.hierarchy.levels[self.level + 1]
             data = self.cloth.levels[self.level + 1]
         self.level += 1
         self.mesh = mesh
-        scene._load_level(data)
-        self.prolongation.apply(mesh, scene.state.x, scene.state.v, n_old)
-        self._set_dt()
-        scene._topology_changed()
+        t = self.state.t
         self._energies = []
-        self._level_t0 = scene.state.t
+        self._level_t0 = t
         self.settled = False
-        self.switches.append(LevelSwitch(self.level, scene.state.t, scene.steps_taken))
+        self.switches.append(LevelSwitch(self.level, t, self._steps))
+
+        def prolong(state, n_before):
+            self.prolongation.apply(mesh, state.x, state.v, n_before)
+
+        return ModelChange(data=data, prolong=prolong, level=self.level, dt_scale=self.dt_scale(self.level),
+                           topology=True, event=f"level {self.level + 1} at t = {t:.3f} s: {data.n_particles} "
+                                                f"particles, {data.n_springs} springs")
+
+    def record(self, frame) -> None:
+        frame.scalars["level"] = self.level + 1
+
+    def layout(self, layout) -> None:
+        layout.series["level"] = "level"
 
     def marked(self) -> np.ndarray:
         """(t,) bool: the current triangles that call for refinement: a dihedral angle across the hypotenuse
         above `angle` degrees (curvature), or a vertex in contact with a collider in the last step."""
         tri = self.mesh.triangles
-        x = self.scene.positions()
+        x = self.state.positions()
         n = np.cross(x[tri[:, 1]] - x[tri[:, 0]], x[tri[:, 2]] - x[tri[:, 0]])
         n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
         key = np.sort(tri[:, :2], axis=1)
@@ -184,7 +203,7 @@ class Refiner:
         a, b = order[first[two]], order[first[two] + 1]
         bent = np.degrees(np.arccos(np.clip((n[a] * n[b]).sum(axis=1), -1.0, 1.0))) > self.angle
         marked[a[bent]] = marked[b[bent]] = True
-        contacts = self.scene.contacts
+        contacts = self.contacts
         if contacts is not None:
             touching = np.linalg.norm(contacts.normal.to_numpy()[: len(x)], axis=1) > 0
             marked |= touching[tri].any(axis=1)

@@ -78,7 +78,8 @@ from .builder import ClothBuilder
 from .errors import MeshError, PatternError, SceneError
 from .integrators import INTEGRATORS
 from .quality import QUALITIES
-from .scene import STEP_GUARDS, Scene
+from .assembly import STEP_GUARDS
+from .scene import Scene
 from .schema import MATERIAL_TABLE, Array, Field, Table, Validator, at_least, material_of, nonneg, positive, read_toml
 
 #: the girths a [body] table may set (taichi_cloth.body.GIRTHS; spelled out so parsing imports no scipy)

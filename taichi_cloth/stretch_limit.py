@@ -12,13 +12,17 @@ divided by h, so the removed stretching velocity goes too.
 import numpy as np
 import taichi as ti
 
-from .cloth import SpringKind
 from clothbase.fields import FieldBlock
+
+from .cloth import SpringKind
+from .control import Controller
 
 
 @ti.data_oriented
-class StretchLimit:
-    """max_strain: allowed relative elongation (0.1 = 10 %); iterations: the most Jacobi passes per step;
+class StretchLimit(Controller):
+    """The scene's stretch limit, applied after every step (a controller).
+
+    max_strain: allowed relative elongation (0.1 = 10 %); iterations: the most Jacobi passes per step;
     tolerance: stop once every limited spring is within max_strain + tolerance (strain units);
     omega: over-relaxation of the averaged correction; kinds: spring kinds limited (default structural
     and shear, as Provot)."""
@@ -43,6 +47,15 @@ class StretchLimit:
         blk.finalize(self)
         self.stats = {"stretch_passes": 0, "stretch_unconverged_steps": 0}
         self.refresh()
+
+    name = "stretch_limit"
+
+    def after_step(self, t: float, dt: float) -> None:
+        self.apply(dt)
+
+    def model_changed(self, change, t: float, dt: float) -> None:
+        if change.refills:
+            self.refresh()
 
     def refresh(self) -> None:
         """Re-read which springs are limited (after the model's springs change)."""

@@ -32,3 +32,13 @@ def max_structural_strain(scene) -> float:
     sel = d.kind == tc.SpringKind.STRUCTURAL
     length = np.linalg.norm(x[d.springs[sel, 1]] - x[d.springs[sel, 0]], axis=1)
     return float((length / d.rest_length[sel] - 1).max())
+
+
+def refine(scene) -> None:
+    """Switch a multilevel scene to its next level now (the refiner's change, applied by the scene)."""
+    scene.apply(scene.controller("refiner").refine())
+
+
+def current_level(scene) -> int:
+    """The current 4-8 level (0-based) of a multilevel scene."""
+    return scene.controller("refiner").level

@@ -50,9 +50,9 @@ def test_body_fitted_before_the_run_carries_the_collider_and_the_placement():
     loaded = load_scene(skirt_scene(waist=0.63, hips=0.92))
     scene = loaded.scene
     fit = fit_body({"waist": 0.63, "hips": 0.92})
-    np.testing.assert_array_equal(scene.colliders[0].vertices_np, fit.vertices)
-    assert scene.body_morph is None
-    body = scene.garment.body
+    np.testing.assert_array_equal(scene.controller("colliders").objects[0].vertices_np, fit.vertices)
+    assert scene.controller("body_morph") is None
+    body = scene.controller("sewing").garment.body
     np.testing.assert_array_equal(body.vertices, fit.vertices)
     # placement analysed the fitted body: its hull girths moved with the targets (0.669 / 0.955 on the base)
     assert body.girths["waist"] == pytest.approx(0.63, abs=0.01)
@@ -78,23 +78,23 @@ def test_skirt_follows_a_body_that_grows_during_the_drape():
     base_girths = gauge.measure(blend.base, names=["waist", "hips"])
     fit = fit_body({"waist": base_girths["waist"] + 0.03, "hips": base_girths["hips"] + 0.05})
     scene = sewn_skirt({"weights": fit.weights, "duration": 0.5})
-    morph = scene.body_morph
-    while not scene.sewing.joined:  # the morph waits for the seams ("sewn")
+    morph = scene.controller("body_morph")
+    while not scene.controller("sewing").joined:  # the morph waits for the seams ("sewn")
         assert morph.begin is None
-        np.testing.assert_array_equal(scene.colliders[0].vertices_np, blend.base)
+        np.testing.assert_array_equal(scene.controller("colliders").objects[0].vertices_np, blend.base)
         t_open = scene.state.t
         scene.run(6, progress=False)
         assert scene.state.t < 2.0
     assert morph.begin is None or morph.begin > t_open
     scene.run(int(round((1.6 - scene.state.t) * 60)), progress=False)  # the 0.5 s morph, then drape to t = 1.6 s
     assert morph.done
-    np.testing.assert_array_equal(scene.colliders[0].vertices_np, fit.vertices)
+    np.testing.assert_array_equal(scene.controller("colliders").objects[0].vertices_np, fit.vertices)
     assert garment_quality(scene).penetrations == 0
     # the same skirt on the unchanged body, to the same time: on the grown body (5 cm more hip girth, 8 mm of
     # radius) the skirt sits wider at the hips (it went out with the body rather than through it)
     control = sewn_skirt()
     control.run(int(round(scene.state.t * 60)), progress=False)
-    hips = scene.garment.body.landmarks["hips"]
+    hips = scene.controller("sewing").garment.body.landmarks["hips"]
     grown, unchanged = hip_band_radius(scene.positions(), hips), hip_band_radius(control.positions(), hips)
     assert grown - unchanged > 0.004, (grown, unchanged)
 

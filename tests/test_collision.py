@@ -226,7 +226,7 @@ def test_implicit_solves_respect_contacts_no_stretch_around_a_small_ball():
     sc.state.set(v=np.tile([0.0, -1.0, 0.0], (900, 1)))
     peak = max(sc.step(30).max_strain for _ in range(6))
     assert peak < 0.15
-    assert np.linalg.norm(sc.contacts.normal.to_numpy(), axis=1).max() == pytest.approx(1.0, abs=1e-5)
+    assert np.linalg.norm(sc.state.contacts.normal.to_numpy(), axis=1).max() == pytest.approx(1.0, abs=1e-5)
 
 
 def test_repulsion_force_is_bounded_continuous_and_outward():
@@ -274,7 +274,7 @@ def test_self_collision_keeps_a_folded_towel_in_two_layers():
     sunk_with, sc = fold(True)
     assert sunk_without > 0.6
     assert sunk_with < 0.3
-    assert sc.colliders[0].counter_values()["corrections"] > 0
+    assert sc.controller("colliders").objects[0].counter_values()["corrections"] > 0
 
 
 def test_standin_approximates_the_mannequin():
@@ -295,4 +295,4 @@ def test_standin_approximates_the_mannequin():
     sc = tc.Scene(tc.ClothBuilder.grid((0.6, 0.6), (10, 10), "cotton", center=(0.0, 1.72, 0.05), plane="xz"),
                   integrator="implicit", dt=1 / 120, colliders=[{"type": "standin"}])
     sc.step(60)
-    assert sc.colliders[0].signed_distance(sc.positions()).min() > -5e-4
+    assert sc.controller("colliders").objects[0].signed_distance(sc.positions()).min() > -5e-4

@@ -54,7 +54,7 @@ def test_two_squares_close_below_epsilon_and_stay_below_the_stretch_limit():
     scene = tc.Scene(g, integrator="implicit", dt=1 / 240, gravity=(0, 0, 0), stretch_limit=dict(max_strain=0.1),
                      sewing=dict(close_speed=0.5, epsilon=0.002))
     summary = scene.run(60, progress=False)  # 1 s
-    sewing = scene.sewing
+    sewing = scene.controller("sewing")
     assert sewing.joined and not sewing.gave_up
     # the ramp needs GAP / close_speed = 0.4 s; sewing must have stopped within twice that
     assert sewing.closed_at <= 0.8
@@ -84,8 +84,8 @@ def test_join_by_stiff_springs_keeps_the_particles():
     g = build_garment(two_squares())
     scene = tc.Scene(g, integrator="implicit", dt=1 / 240, gravity=(0, 0, 0), sewing=dict(join="spring"))
     scene.run(60, progress=False)
-    assert scene.sewing.joined and scene.model.data.n_particles == g.data.n_particles
-    assert scene.sewing.gaps().max() < 0.002
+    assert scene.controller("sewing").joined and scene.model.data.n_particles == g.data.n_particles
+    assert scene.controller("sewing").gaps().max() < 0.002
 
 
 GOOD = """
@@ -190,7 +190,7 @@ def test_skirt_sews_onto_the_mannequin(body):
                                                   "friction": 0.4}],
                      stretch_limit=dict(max_strain=0.1, iterations=20), sewing=dict(energy_tolerance=0.05))
     summary = scene.run(120, progress=False)  # 2 s: sewing (gravity off) then draping
-    assert scene.sewing.joined and not scene.sewing.gave_up, summary.format()
+    assert scene.controller("sewing").joined and not scene.controller("sewing").gave_up, summary.format()
     q = garment_quality(scene)
     assert q.penetrations == 0
     assert len(q.pieces) == 2
@@ -268,7 +268,7 @@ def test_fixed_points_hold_while_the_rest_falls():
     scene = tc.Scene(g, integrator="implicit", dt=1 / 240, sewing=dict(gravity=True))
     scene.run(30, progress=False)
     x = scene.positions()
-    sewing = scene.sewing
+    sewing = scene.controller("sewing")
     np.testing.assert_allclose(x[sewing.current_of[g.fixed]], held, atol=1e-6)
     com0 = (g.data.mass * g.data.positions[:, 1]).sum() / g.data.mass.sum()
     com = (scene.model.data.mass * x[:, 1]).sum() / scene.model.data.mass.sum()
@@ -281,7 +281,7 @@ def test_recording_has_the_strain_map_seam_gap_and_merge(tmp_path):
     rec = tc.Recorder(tmp_path / "sew.rrd")
     summary = scene.run(45, recorder=rec, progress=False)
     rec.close()
-    assert scene.sewing.joined and any("seams closed" in e for e in summary.events)
+    assert scene.controller("sewing").joined and any("seams closed" in e for e in summary.events)
     got = rows_by_entity(tmp_path / "sew.rrd")
     static, frames, cols = got["/cloth/mesh"]
     assert static == 0  # the topology is on the timeline: it changes at the merge

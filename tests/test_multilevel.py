@@ -9,6 +9,7 @@ from multilevel.hierarchy import (Hierarchy48, boundary_vertices, edge_use, hang
 from taichi_cloth.errors import SceneError
 from taichi_cloth.multilevel_cloth import multilevel_grid
 from taichi_cloth.scenefile import load_scene
+from conftest import current_level, refine
 from test_recording_and_cli import rows_by_entity
 
 W, H, NX, NY, LEVELS = 1.2, 0.8, 3, 2, 6
@@ -113,8 +114,8 @@ def test_a_refinement_keeps_the_shape_and_the_momentum_exactly():
         x, v, m = sc.positions(), sc.velocities(), sc.model.data.mass
         n = len(x)
         level = sc.model.data
-        sc.refine()
-        L = sc.multilevel_cloth.hierarchy.levels[sc.level]
+        refine(sc)
+        L = sc.controller("refiner").cloth.hierarchy.levels[current_level(sc)]
         x2, v2, m2 = sc.positions(), sc.velocities(), sc.model.data.mass
         assert len(x2) == L.n_vertices > n and sc.model.n_particles[None] == L.n_vertices
         assert np.array_equal(x2[:n], x) and np.array_equal(v2[:n], v)
@@ -139,20 +140,20 @@ def test_pins_hold_through_level_switches_and_are_reselected_on_each_level():
         sc.step(10)
         assert np.allclose(sc.positions()[top], sc.model.data.positions[top], atol=1e-6)
         if level < 3:
-            sc.refine()
+            refine(sc)
     with pytest.raises(ValueError, match="finest"):
-        sc.refine()
+        refine(sc)
 
 
 def test_level_switches_compile_nothing():
     sc = hanging(refine=False, levels=4)
     sc.step(2)
-    sc.refine()
+    refine(sc)
     sc.step(2)  # the prolongation kernel compiles at the first switch
     with tc.CompileCounter() as cc:
-        sc.refine()
+        refine(sc)
         sc.step(2)
-        sc.refine()
+        refine(sc)
         sc.step(2)
         sc.reset()
         sc.step(2)
@@ -163,12 +164,10 @@ def test_a_scene_without_multilevel_builds_none_of_it():
     with tc.CompileCounter() as cc:
         sc = tc.Scene(tc.ClothBuilder.grid((0.5, 0.5), (6, 6)), integrator="approx-implicit", dt=0.005)
         sc.step(2)
-    assert sc.refiner is None and sc.level is None
+    assert sc.controller("refiner") is None and [c.name for c in sc.controllers] == []
     assert not any(name.startswith("Prolongation") for name in cc.names())
     with pytest.raises(SceneError, match="multilevel"):
         tc.Scene(tc.ClothBuilder.grid((0.5, 0.5), (6, 6)), multilevel={})
-    with pytest.raises(SceneError, match="no levels"):
-        sc.refine()
 
 
 def test_coarse_to_fine_drape_ends_where_the_fine_drape_does():
@@ -181,11 +180,11 @@ def test_coarse_to_fine_drape_ends_where_the_fine_drape_does():
     for start in (0, 3):
         sc = hanging(start_level=start, levels=4, pins=EDGE, **settle)
         frames = 0
-        while not (sc.refiner.at_finest and sc.refiner.settled) and frames < 1500:
-            sc.refiner.observe(sc.step(sc.substeps))
+        while not (sc.controller("refiner").at_finest and sc.controller("refiner").settled) and frames < 1500:
+            sc.run(1, progress=False)
             frames += 1
-        assert sc.refiner.settled, f"start level {start + 1} did not settle in {frames} frames"
-        assert [s.level for s in sc.refiner.switches] == list(range(start, 4))
+        assert sc.controller("refiner").settled, f"start level {start + 1} did not settle in {frames} frames"
+        assert [s.level for s in sc.controller("refiner").switches] == list(range(start, 4))
         finals.append(sc.positions())
     d = np.linalg.norm(finals[0] - finals[1], axis=1)
     assert d.max() < 0.01, d.max()
@@ -214,12 +213,13 @@ max_time = 0.2
     path.write_text(text)
     loaded = load_scene(path)
     sc = loaded.scene
-    assert sc.level == 0 and sc.model.data.n_particles == 9
+    assert current_level(sc) == 0 and sc.model.data.n_particles == 9
     rec = tc.Recorder(tmp_path / "ml.rrd")
     summary = sc.run(loaded.frames, recorder=rec, progress=False)
     rec.close()
-    assert [s.level for s in summary.levels] == [0, 1, 2] and summary.n_particles == 25
-    assert "levels: 1 (t = 0 s) -> 2" in summary.format()
+    assert [s.level for s in sc.controller("refiner").switches] == [0, 1, 2] and summary.n_particles == 25
+    assert [e.split(" at ")[0] for e in summary.events] == ["level 2", "level 3"]
+    assert "level 2 at t = 0.200 s: 13 particles" in summary.format()
     got = rows_by_entity(tmp_path / "ml.rrd")
     static, frames, _ = got["/cloth/mesh"]
     assert static == 0 and len(frames) >= 41  # topology on the timeline, not static
@@ -254,18 +254,18 @@ def test_multigrid_option_lets_a_stiff_sheet_fall_like_backward_euler_and_surviv
     assert falls[2] == pytest.approx(exact, rel=1e-3)
     # coarse to fine with the multigrid: level switches re-target the solver and compile nothing
     sc = hanging(levels=3, refine=False)
-    sc = tc.Scene(sc.multilevel_cloth, integrator="approx-implicit", dt=1 / 120, pins=[EDGE],
+    sc = tc.Scene(sc.controller("refiner").cloth, integrator="approx-implicit", dt=1 / 120, pins=[EDGE],
                   integrator_options={"multigrid_cycles": 2}, multilevel={"refine": False})
     sc.step(2)
-    sc.refine()
+    refine(sc)
     sc.step(2)
     with tc.CompileCounter() as cc:
-        sc.refine()
+        refine(sc)
         sc.step(20)
     assert cc.total == 0, cc.compiled
     assert sc.integrator.multigrid.active == 2 and sc.check().max_strain < 0.05
     sc.reset()  # back to the start level: the solver follows
-    assert sc.level == 0 and sc.integrator.multigrid.active == 0
+    assert current_level(sc) == 0 and sc.integrator.multigrid.active == 0
     sc.step(5)
     with pytest.raises(SceneError, match="multilevel"):
         tc.Scene(tc.ClothBuilder.grid((0.5, 0.5), (6, 6)), integrator="approx-implicit",
@@ -290,8 +290,8 @@ def test_an_outline_hierarchy_drapes_through_its_levels_with_its_mass():
     for _ in range(2):
         sc.step(10)
         x = sc.positions()
-        sc.refine()
-        L = cloth.hierarchy.levels[sc.level]
+        refine(sc)
+        L = cloth.hierarchy.levels[current_level(sc)]
         assert np.abs(sc.positions() - L.prolong(x)).max() < 1e-13
         assert sc.check().max_strain < 0.05
 
@@ -305,7 +305,7 @@ def test_local_refinement_follows_the_drape_and_stays_conforming():
     sc = tc.Scene(cloth, integrator="implicit", dt=1 / 120, colliders=[dict(type="sphere", center=ball, radius=0.25)],
                   multilevel=dict(refine="local", max_time=0.4, angle=15.0))
     sc.run(120, progress=False)
-    r = sc.refiner
+    r = sc.controller("refiner")
     assert [s.level for s in r.switches] == [0, 1, 2, 3, 4]
     mesh = r.mesh
     assert len(hanging_vertices(mesh.uv, mesh.triangles)) == 0 and edge_use(mesh.triangles)[1].max() == 2
@@ -313,4 +313,4 @@ def test_local_refinement_follows_the_drape_and_stays_conforming():
     assert cloth.levels[1].n_particles < sc.model.data.n_particles < cloth.levels[-1].n_particles
     assert sc.model.data.mass.sum() == pytest.approx(0.15, rel=1e-13)
     gap = np.abs(np.linalg.norm(sc.positions() - ball, axis=1) - 0.25)[mesh.triangles].mean(axis=1)
-    assert gap[r._depth == r._depth.max()].mean() < 0.5 * gap[r._depth == r._depth.min()].mean()
+    assert gap[r.depth == r.depth.max()].mean() < 0.5 * gap[r.depth == r.depth.min()].mean()

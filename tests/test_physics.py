@@ -172,7 +172,7 @@ def test_stretch_limit_holds_the_limit():
     assert few > 0.12
     held, sc = run({"max_strain": 0.1, "iterations": 200, "tolerance": 1e-3, "omega": 1.8})
     assert held <= 0.1 + 1e-3 + 1e-5
-    assert sc.stretch_limit.stats["stretch_unconverged_steps"] < 0.05 * 480
+    assert sc.controller("stretch_limit").stats["stretch_unconverged_steps"] < 0.05 * 480
 
 
 @pytest.mark.parametrize("integrator", ["explicit", "verlet", "central-difference", "implicit"])

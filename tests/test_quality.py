@@ -41,9 +41,9 @@ def test_a_preset_sets_integrator_step_and_level_of_a_grid_scene(quality):
     n = coarsen_resolution([32, 32], p.level)
     assert scene.model.data.n_particles == n[0] * n[1]
     if p.dt is not None:
-        assert scene.dt == pytest.approx(p.dt) and scene.adaptive is None
+        assert scene.dt == pytest.approx(p.dt) and not scene.clock.auto
     else:  # a fraction of the explicit bound: the automatic step with that safety factor
-        assert scene.adaptive is not None and scene.adaptive.options.safety == p.dt_bound_fraction
+        assert scene.clock.auto and scene.clock.options.safety == p.dt_bound_fraction
         assert scene.dt <= p.dt_bound_fraction * scene.stable_dt * (1 + 1e-12)
     assert loaded.config["_quality"] == p
     m = scene.step(4)
@@ -68,7 +68,7 @@ def test_a_preset_level_drops_levels_of_a_multilevel_scene():
     p = min(load_presets().values(), key=lambda p: p.level)
     cfg = parse_scene(SCENES / "multilevel_drape.toml")
     loaded = tc.load_scene(SCENES / "multilevel_drape.toml", quality=p.name)
-    assert len(loaded.scene.multilevel_cloth.levels) == max(1, cfg["multilevel"]["levels"] + p.level)
+    assert len(loaded.scene.controller("refiner").cloth.levels) == max(1, cfg["multilevel"]["levels"] + p.level)
 
 
 def test_the_presets_file_is_checked(tmp_path):

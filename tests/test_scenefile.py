@@ -37,8 +37,8 @@ def test_good_file_builds_what_it_names(tmp_path):
     assert sc.integrator.name == "approx-implicit" and sc.dt == 0.005
     assert sc.model.data.n_particles == 36 and sc.model.pinned.sum() == 2
     assert sc.model.data.mass.sum() == pytest.approx(tc.MATERIALS["silk"].density * 0.25)
-    assert sc.wind is None and sc.stretch_limit is None and sc.pins is None and sc.colliders == []
-    assert sc.contacts is None
+    assert [c.name for c in sc.controllers] == ["pins"] and not sc.controller("pins").moving
+    assert sc.forces.sources == () and sc.state.contacts is None
 
 
 def test_colliders_from_a_file(tmp_path):
@@ -61,11 +61,12 @@ friction = 0.8
 """
     sc = tc.load_scene(write(tmp_path, text.replace('name = "t"\n', 'name = "t"\nself_collision = true\n', 1)
                              .replace("\nself_collision = true\n[[colliders]]", "\n[[colliders]]", 1))).scene
-    kinds = [type(c).__name__ for c in sc.colliders]
+    colliders = sc.controller("colliders").objects
+    kinds = [type(c).__name__ for c in colliders]
     assert kinds == ["SelfCollision", "MeshCollider", "PrimitiveColliders", "PrimitiveColliders"]
-    assert sc.colliders[1].mode == "exact" and sc.colliders[1].repulsion.distance == 0.005
-    assert sc.colliders[3].friction == 0.8 and sc.colliders[2].n_spheres == 1
-    assert sc.forces.sources == (sc.colliders[1].repulsion,)
+    assert colliders[1].mode == "exact" and colliders[1].repulsion.distance == 0.005
+    assert colliders[3].friction == 0.8 and colliders[2].n_spheres == 1
+    assert sc.forces.sources == (colliders[1].repulsion,)
 
 
 def test_overrides_replace_integrator_and_step(tmp_path):

@@ -40,14 +40,15 @@ def _record(n: int, settle: float, steps: int):
     scene = Scene(cloth, integrator="implicit", dt=1 / 120, air_damping=0.3, integrator_options={"cg_tolerance": 1e-2},
                   colliders=[{"type": "mesh", "path": "mannequin", "thickness": 0.004, "friction": 0.4}])
     scene.step(int(round(settle / scene.dt)))
+    body = scene.controller("colliders").objects[0]
     frames = []
     for _ in range(steps):
         x0 = scene.positions()
-        scene.colliders[0].begin_step()
+        body.begin_step()
         scene.integrator.step(scene.dt)  # the integrator alone: its end state is what collision must resolve
         frames.append((x0, scene.positions(), scene.velocities()))
-        scene.contacts.clear()
-        scene.colliders[0].resolve(scene.dt)
+        scene.state.contacts.clear()
+        body.resolve(scene.dt)
     return scene, (v, t), frames
 
 
@@ -100,7 +101,7 @@ def run(args) -> int:
         approx = ApproxImplicit(scene.model, scene.state, scene.forces)
         approx.step(scene.dt)
         approx_ms = statistics.median([_timed(lambda: approx.step(scene.dt)) for _ in range(8)])
-        mean_edge = scene.colliders[0].mean_edge
+        mean_edge = scene.controller("colliders").objects[0].mean_edge
         for factor in args.cells:
             for mode, gate in (("fuzzy", True), ("exact", True), ("fuzzy", False)):
                 if (mode, gate) != ("fuzzy", True) and factor != 1.5:

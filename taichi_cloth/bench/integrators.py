@@ -51,15 +51,15 @@ def time_scene(scene, steps: int, blocks: int = 5) -> dict:
     from ..errors import BlowUpError
 
     t0 = time.perf_counter()
-    scene._advance(1)
+    scene.advance(1)
     ti.sync()
     first = time.perf_counter() - t0
-    scene._advance(3)
+    scene.advance(3)
     ti.sync()
     per_block = []
     for _ in range(blocks):
         t0 = time.perf_counter()
-        scene._advance(steps)
+        scene.advance(steps)
         ti.sync()
         per_block.append(1e3 * (time.perf_counter() - t0) / steps)
     ms = statistics.median(per_block)

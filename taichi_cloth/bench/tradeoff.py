@@ -182,13 +182,6 @@ def configs(variants, levels, dts=DT_LADDER, fractions=BOUND_FRACTIONS, explicit
     return out
 
 
-def set_dt(scene, dt: float) -> None:
-    """Set the step [s] of a scene that stays on one level (a multilevel scene resets to its finest dt)."""
-    if scene.refiner is not None:
-        scene.refiner.finest_dt = dt
-    scene.dt = dt
-
-
 @dataclass
 class Reference:
     """The reference of one scene. traj: the implicit float64 run at ref_dt on the finest level; triangles (T,3);
@@ -285,7 +278,7 @@ def run_study(scene_names, variants, levels_below=(0, 1, 2), base: int = 4, n_le
                 scenes = {sk: spec.build(base, cfg.level, cfg.variant, DT_LADDER[0])}
             scene = scenes[sk]
             bound = scene.stable_dt
-            set_dt(scene, cfg.dt if cfg.bound_fraction is None else cfg.bound_fraction * bound)
+            scene.dt = cfg.dt if cfg.bound_fraction is None else cfg.bound_fraction * bound
             scene.reset()
             traj = run_sampled(scene, times)
             row = {"scene": name, "variant": cfg.variant, "level": cfg.level + 1,

@@ -13,31 +13,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..cloth import SpringKind
-
-
-def vertex_strain(data, x: np.ndarray) -> np.ndarray:
-    """(P,) largest |strain| of the structural springs at each particle (x: (P,3) [m]); 0 where none."""
-    x = np.asarray(x, dtype=np.float64)[: data.n_particles]
-    s = data.kind == int(SpringKind.STRUCTURAL)
-    a, b = data.springs[s, 0], data.springs[s, 1]
-    L0 = data.rest_length[s]
-    strain = np.abs(np.linalg.norm(x[b] - x[a], axis=1) / np.maximum(L0, 1e-12) - 1.0)
-    out = np.zeros(data.n_particles)
-    np.maximum.at(out, a, strain)
-    np.maximum.at(out, b, strain)
-    return out
-
-
-def strain_colors(strain: np.ndarray, full_scale: float = 0.1) -> np.ndarray:
-    """(P,4) uint8 RGBA strain map: white at 0, through yellow to red at `full_scale` (10 %) and above."""
-    s = np.clip(np.asarray(strain) / full_scale, 0.0, 1.0)
-    rgba = np.empty((len(s), 4), np.uint8)
-    rgba[:, 0] = 255
-    rgba[:, 1] = (255 * (1.0 - 0.75 * s)).astype(np.uint8)
-    rgba[:, 2] = (255 * np.clip(1.0 - 2.0 * s, 0.0, 1.0)).astype(np.uint8)
-    rgba[:, 3] = 255
-    return rgba
 
 
 @dataclass
@@ -124,13 +99,14 @@ def piece_quality(garment, current_of: np.ndarray, x: np.ndarray) -> list[PieceQ
 def garment_quality(scene, static_speed: float = 0.01) -> GarmentQuality:
     """The GarmentQuality of a garment scene now. Penetrations count particles whose signed distance to a mesh
     collider (the body) is negative; static: max speed below `static_speed` [m/s] with the sewing finished."""
-    sewing = scene.sewing
+    sewing = scene.controller("sewing")
+    if sewing is None:
+        raise ValueError("garment_quality needs a garment scene (its cloth a GarmentCloth)")
     x = scene.positions()
     gaps = sewing.gaps(x)
-    pieces = piece_quality(scene.garment, sewing.current_of, x)
-    from collision.body import MeshCollider
-
-    bodies = [c for c in scene.colliders if isinstance(c, MeshCollider)]
+    pieces = piece_quality(sewing.garment, sewing.current_of, x)
+    colliders = scene.controller("colliders")
+    bodies = colliders.bodies if colliders is not None else []
     penetrations = int(sum(np.count_nonzero(b.signed_distance(x) < 0.0) for b in bodies)) if bodies else None
     m = scene.measure()
     notes = []
@@ -147,8 +123,9 @@ def draped_pieces(scene) -> list:
     of (name, vertices (n,3) float64 [m], triangles (t,3) int64, corners {corner name: vertex}) in the piece's own
     numbering (its PieceMesh's: triangles counter-clockwise in the pattern, seen from outside). A particle merged
     at a seam appears in both of its pieces."""
-    garment = scene.garment
-    x = scene.positions()[scene.sewing.current_of]  # the original numbering
+    sewing = scene.controller("sewing")
+    garment = sewing.garment
+    x = scene.positions()[sewing.current_of]  # the original numbering
     out = []
     for k, mesh in enumerate(garment.meshes):
         corners = {name: int(seg[0]) for name, seg in zip(mesh.piece.corner_names, mesh.boundary_segments)}

@@ -11,7 +11,9 @@ spring's rest length), so the closing speed is min(close_speed, max_force / (k_s
 (5 N, k_s = 1091 N/m for cotton, dt = 1/120 s) that is 0.5 m/s, the ramp's.
 
 Sewing stops when every pair is closer than `epsilon` and the elastic energy changed by less than
-`energy_tolerance` (relative) over the last frame (seed 004). Then the pairs are joined: merged into one
+`energy_tolerance` over the last frame, relative to the energy itself or, when that is smaller, to the energy of
+one seam pair held at the closing gap (below that a change is round-off: two flat squares sewn in zero gravity
+end with 1e-11 J whose frame-to-frame noise is tens of per cent). Then the pairs are joined: merged into one
 particle each (default; seed 003's alternative, a very stiff short spring, is join = "spring"), the seam edges
 get bend springs across them, gravity comes back on if it was off while sewing, and the drape continues.
 """
@@ -25,6 +27,7 @@ import taichi as ti
 from clothbase.meshes import connected_components, edges_of
 
 from ..cloth import ClothData, SpringKind
+from ..control import Controller, FrameInfo, ModelChange
 
 JOINS = ("merge", "spring", "none")
 
@@ -68,49 +71,62 @@ class SeamGap:
 
 
 @ti.data_oriented
-class Sewing:
-    """Closes the seams of a scene whose cloth is a GarmentCloth (built by Scene; one kernel, compiled once).
+class Sewing(Controller):
+    """Closes the seams of a scene whose cloth is a GarmentCloth (a controller; one kernel, compiled once).
 
+    model, state, forces: the scene's; garment: the GarmentCloth; options: SewingOptions.
     active:     True while sewing; closed_at: simulated time [s] the seams closed (None before)
-    wall:       wall-clock seconds from the start of sewing (the first run, or the first step) to the join,
-                kernel compiles included
+    joined:     the seams were joined; gave_up: sewing stopped at max_time with seams open
+    wall:       wall-clock seconds from the first step while sewing to the join, kernel compiles included
     history:    list of SeamGap, one per observed frame (also after joining, measured on the joined pairs)
     current_of: (P0,) int64 the current particle of every original particle (identity until a merge)
     """
 
-    def __init__(self, scene, garment, options: SewingOptions):
-        self.scene, self.garment, self.options = scene, garment, options
-        self.model, self.x = scene.model, scene.state.x  # the kernel reads these fields
-        self.pairs = garment.seam_pairs.copy()  # in the current numbering
-        self.first = garment.first_seam_spring
-        self.count = len(self.pairs)
-        self.current_of = np.arange(garment.data.n_particles, dtype=np.int64)
-        self.gravity = scene.forces.gravity_value.copy()
-        self.history: list[SeamGap] = []
-        self.reset()
+    name = "sewing"
 
-    def reset(self) -> None:
+    def __init__(self, model, state, forces, garment, options: SewingOptions):
+        self.model, self.state, self.forces = model, state, forces
+        self.x = state.x  # the kernel reads this field
+        self.garment, self.options = garment, options
+        self.changes_topology = options.join == "merge"
+        self.first = garment.first_seam_spring
+        self.count = len(garment.seam_pairs)
+        self.gravity = forces.gravity_value.copy()
+        # the elastic energy of one seam pair held at the closing gap: a change below tolerance x this is noise
+        k_seam = garment.data.stiffness[self.first:].max() if self.count else 0.0
+        self.energy_floor = max(0.5 * float(k_seam) * options.epsilon ** 2, 1e-12)
+        self.history: list[SeamGap] = []
+        self._start()
+
+    def _start(self) -> None:
         self.active = self.count > 0
+        self.current_of = np.arange(self.garment.data.n_particles, dtype=np.int64)
         self.closed_at = None
         self.wall = None
         self._wall0 = None
         self.joined = False
         self.gave_up = False
         self._energy = None
-        self.t0 = self.scene.state.t
         if self.active and not self.options.gravity:
-            self.scene.forces.set_gravity((0.0, 0.0, 0.0))
+            self.forces.set_gravity((0.0, 0.0, 0.0))
+
+    def reset(self) -> ModelChange:
+        """Back to the pieces as placed, apart, gravity off while sewing: the model is refilled with the garment
+        as built (also before a join: the ramp has shortened the seam springs' rest lengths in the fields)."""
+        self._start()
+        data = self.garment.data
+        return ModelChange(data=data, rest=True,
+                           topology=self.model.data is not data)
 
     # ------------------------------------------------------------------ per step
-    def step(self, dt: float) -> None:
-        """Shrink the seam springs' rest lengths (ramp and force cap)."""
-        self.start_clock()
-        self._ramp(self.first, self.count, self.options.close_speed * dt, self.options.max_force)
-
-    def start_clock(self) -> None:
-        """Start the wall clock of `wall` (once)."""
-        if self._wall0 is None:
+    def before_step(self, t: float, dt: float) -> None:
+        if self.active and self._wall0 is None:
             self._wall0 = time.perf_counter()
+
+    def after_step(self, t: float, dt: float) -> None:
+        """Shrink the seam springs' rest lengths (ramp and force cap)."""
+        if self.active:
+            self._ramp(self.first, self.count, self.options.close_speed * dt, self.options.max_force)
 
     @ti.kernel
     def _ramp(self, first: ti.i32, count: ti.i32, shrink: ti.f64, max_force: ti.f64):
@@ -125,7 +141,7 @@ class Sewing:
     # ------------------------------------------------------------------ per frame
     def gaps(self, x: np.ndarray | None = None) -> np.ndarray:
         """(K,) distance [m] between the two particles of every seam pair now (0 for merged pairs)."""
-        x = self.scene.positions() if x is None else x
+        x = self.state.positions() if x is None else x
         p = self.current_of[self.garment.seam_pairs]
         return np.linalg.norm(x[p[:, 1]] - x[p[:, 0]], axis=1)
 
@@ -138,59 +154,61 @@ class Sewing:
                 out[seam.name] = float(g.max())
         return out
 
-    def observe(self, m) -> bool:
-        """Feed one frame's measurement: record the seam gap, and join the seams once they are closed and the
-        elastic energy has settled. Returns True when the cloth's topology changed (a merge)."""
+    def after_frame(self, frame: FrameInfo) -> ModelChange | None:
+        """Record the seam gap, and join the seams once they are closed and the elastic energy has settled
+        (changed by less than energy_tolerance of itself, or of one seam pair's energy at the closing gap)."""
         g = self.gaps()
-        self.history.append(SeamGap(self.scene.state.t, float(g.max()) if len(g) else 0.0,
-                                    float(g.mean()) if len(g) else 0.0))
+        self.history.append(SeamGap(frame.t, float(g.max()) if len(g) else 0.0, float(g.mean()) if len(g) else 0.0))
         if not self.active:
-            return False
+            return None
+        m = frame.measurement
         previous, self._energy = self._energy, m.elastic
         settled = previous is not None and abs(m.elastic - previous) <= self.options.energy_tolerance * max(
-            abs(m.elastic), 1e-12)
+            abs(m.elastic), self.energy_floor)
         if len(g) and g.max() < self.options.epsilon and settled:
-            self.closed_at = self.scene.state.t
-            return self._join()
-        if self.scene.state.t - self.t0 >= self.options.max_time:
+            self.closed_at = frame.t
+            return self._join(frame, float(g.max()))
+        if frame.t >= self.options.max_time:
             self.gave_up = True
             self.active = False
-            self.scene.forces.set_gravity(self.gravity)
+            self.forces.set_gravity(self.gravity)
             opened = ", ".join(f"{k} ({1e3 * v:.1f} mm)" for k, v in self.open_seams(g).items())
-            self.scene.warnings.append(f"sewing gave up after {self.options.max_time:g} s: open seams {opened or 'none'}"
-                                       f" (largest gap {1e3 * g.max():.1f} mm, epsilon "
+            return ModelChange(warning=f"sewing gave up after {self.options.max_time:g} s: open seams "
+                                       f"{opened or 'none'} (largest gap {1e3 * g.max():.1f} mm, epsilon "
                                        f"{1e3 * self.options.epsilon:g} mm); the seam springs stay")
-        return False
+        return None
 
     # ------------------------------------------------------------------ joining
-    def _join(self) -> bool:
+    def _join(self, frame: FrameInfo, gap: float) -> ModelChange:
         self.wall = time.perf_counter() - self._wall0 if self._wall0 is not None else 0.0
         self.active = False
         self.joined = True
-        self.scene.forces.set_gravity(self.gravity)
+        self.forces.set_gravity(self.gravity)
         join = self.options.join
-        if join == "none":
-            return False
-        scene = self.scene
+        data = self.model.data
+        x, v = self.state.positions(), self.state.velocities()
         if join == "spring":
-            data = scene.model.data
             seam = data.kind == int(SpringKind.SEAM)
             k = self.options.join_stiffness or 10.0 * float(data.stiffness[seam].max())
-            stiffness = np.where(seam, k, data.stiffness)
-            new = ClothData(scene.positions(), data.mass, data.springs, np.where(seam, 0.0, data.rest_length),
-                            stiffness, np.where(seam, self.garment.material.damping * k, data.damping), data.kind,
-                            data.triangles)
-            x, v = scene.positions(), scene.velocities()
-            scene._load_level(new)
-            scene.state.set(x=x, v=v)
-            scene._topology_changed()
-            return False
-        new, x, v, self.current_of = merge_seams(scene.model.data, self.garment, scene.positions(),
-                                                 scene.velocities())
-        scene._load_level(new)
-        scene.state.set(x=x, v=v)
-        scene._topology_changed()
-        return True
+            data = ClothData(x, data.mass, data.springs, np.where(seam, 0.0, data.rest_length),
+                             np.where(seam, k, data.stiffness),
+                             np.where(seam, self.garment.material.damping * k, data.damping), data.kind, data.triangles)
+        elif join == "merge":
+            data, x, v, self.current_of = merge_seams(data, self.garment, x, v)
+        what = {"merge": "pairs merged", "spring": "pairs joined by stiff springs", "none": "seam springs kept"}[join]
+        event = (f"seams closed at t = {self.closed_at:.3f} s after {frame.steps} steps and {self.wall:.2f} s of wall "
+                 f"time, compiles included (largest gap {1e3 * gap:.2f} mm): {what}; {data.n_particles} particles now")
+        if join == "none":
+            return ModelChange(event=event)
+        return ModelChange(data=data, x=x, v=v, topology=join == "merge", event=event)
+
+    # ------------------------------------------------------------------ what a recording shows
+    def layout(self, layout) -> None:
+        layout.series["seam_gap"] = ["max [mm]", "mean [mm]"]
+
+    def record(self, frame) -> None:
+        gaps = self.gaps(frame.positions.astype(np.float64))
+        frame.scalars["seam_gap"] = [1e3 * gaps.max(), 1e3 * gaps.mean()] if len(gaps) else [0.0, 0.0]
 
 
 def merge_seams(data: ClothData, garment, x: np.ndarray, v: np.ndarray):

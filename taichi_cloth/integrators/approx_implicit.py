@@ -27,16 +27,16 @@ Pinned particles have dv = 0 in the solve; a particle in contact with a collider
 normal component of its dv removed after every sweep (the BW98 constraint filter, see taichi_cloth.contacts).
 """
 
-import warnings
-
 import taichi as ti
+
+from clothbase.errors import warn
+from clothbase.fields import FieldBlock
 
 from .base import Integrator, Option, at_least_one
 
 
 def non_negative(v):
     return None if v >= 0 else "must be >= 0"
-from clothbase.fields import FieldBlock
 
 
 @ti.data_oriented
@@ -61,11 +61,11 @@ class ApproxImplicit(Integrator):
                                  "the h J~ v term is unstable, ALGORITHMS.md 1.1)")
             self.options["jv_term"] = True
         if self.options["warm_start"]:
-            warnings.warn("approx-implicit warm_start is linearly unstable on spring modes (spectral radius up to "
-                          "~1.2 per step); expect a blow-up on stiff cloth", stacklevel=2)
+            warn("approx-implicit warm_start is linearly unstable on spring modes (spectral radius up to ~1.2 per "
+                 "step); expect a blow-up on stiff cloth")
         if self.options["sweeps"] > 2 and not self.options["jv_term"]:
-            warnings.warn("approx-implicit with more than 2 sweeps and no jv_term is known to go unstable "
-                          "on cloth (ALGORITHMS.md 1.1, surprise 2); set jv_term = true", stacklevel=2)
+            warn("approx-implicit with more than 2 sweeps and no jv_term is known to go unstable on cloth (see "
+                 "docs/integrators.md); set jv_term = true")
         P = model.capacity[0]
         blk = FieldBlock()
         self.rhs = blk.vector(3, model.fp, P)      # h f (+ h^2 J~ v) [kg m/s]
@@ -83,6 +83,11 @@ class ApproxImplicit(Integrator):
 
     # ------------------------------------------------------------------ multigrid (multilevel cloths only)
     #: Scene calls attach_levels when this is True (a multilevel cloth is required)
+    def unstable_advice(self) -> str | None:
+        if self.options["sweeps"] > 2 and not self.options["jv_term"]:
+            return "more than 2 sweeps need jv_term = true"
+        return None
+
     @property
     def needs_levels(self) -> bool:
         return self.options["multigrid_cycles"] > 0

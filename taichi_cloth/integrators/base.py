@@ -83,6 +83,10 @@ class Integrator:
         prolonged: by default forget any history."""
         self.reset()
 
+    def unstable_advice(self) -> str | None:
+        """A hint for the blow-up message beyond "a smaller step" (e.g. an option known to be unstable), or None."""
+        return None
+
     @classmethod
     def is_stable(cls, h: float, omega: float, gamma: float, beta: float) -> bool:
         return True

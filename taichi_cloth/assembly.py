@@ -1,0 +1,294 @@
+"""Scene assembly: a cloth and the options a scene names -> the parts of a Scene (model, state, forces, integrator,
+step clock, controllers). Only what is named is built, and only its kernels are ever compiled.
+
+This is the one place that knows every feature: adding one adds a keyword here and a controller (taichi_cloth.control)
+of its own, and the Scene's loop stays as it is.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from clothbase.errors import warn
+
+from .adaptive import AdaptiveOptions, AdaptiveStep
+from .clock import FixedStep
+from .colliders import Colliders, build_colliders
+from .contacts import Contacts
+from .errors import SceneError
+from .forces import ForceModel
+from .integrators import integrator_class
+from .model import Model, State, omega_max_bound
+from .pins import Pins, PinSpec, pinned_mask
+from .stability import stable_dt
+from .stretch_limit import StretchLimit
+from .wind import Wind
+
+STEP_GUARDS = ("warn", "refuse", "off")
+DEFAULT_INTEGRATOR = "implicit"
+
+
+@dataclass
+class SceneParts:
+    """What a Scene is made of. controllers run in this order: the refiner, the body morph, pins, sewing, the
+    stretch limit, the colliders, the strain map."""
+
+    name: str
+    model: Model
+    state: State
+    forces: ForceModel
+    integrator: object
+    clock: object
+    controllers: list = field(default_factory=list)
+    normals: object = None
+    warnings: list = field(default_factory=list)
+    max_speed: float = 200.0
+    max_strain: float = 10.0
+
+
+def assemble(cloth, *, name: str = "cloth", integrator: str = DEFAULT_INTEGRATOR, dt: float | str = 1.0 / 240.0,
+             integrator_options: dict | None = None, gravity=(0.0, -9.81, 0.0), air_damping: float = 0.1, pins=(),
+             wind: dict | None = None, stretch_limit: dict | None = None, colliders=(), self_collision=False,
+             multilevel: dict | None = None, sewing: dict | None = None, body_morph: dict | None = None,
+             fps: float = 60.0, adaptive: dict | None = None, precision: str = "f32", step_guard: str = "warn",
+             max_speed: float = 200.0, max_strain: float = 10.0, base_dir=None) -> SceneParts:
+    """The parts of a scene (Scene(cloth, **options) calls this). Units are SI.
+
+    cloth:              ClothData, a Model, a MultilevelCloth (ClothBuilder.multilevel_grid) or a GarmentCloth
+    integrator:         "explicit" | "verlet" | "central-difference" | "approx-implicit" | "implicit" (default: implicit,
+                        unconditionally stable and accurate; see docs/integrators.md)
+    dt:                 time step [s], or "auto": chosen before every frame from the integrator's stable step
+                        (taichi_cloth.adaptive; one step per frame for the implicit integrators)
+    adaptive:           with dt = "auto": AdaptiveOptions keyword arguments (safety, dt_min, dt_max, growth,
+                        calm_steps, motion, rollback)
+    integrator_options: dict of the integrator's OPTIONS
+    gravity:            [m/s^2]; air_damping: drag rate [1/s]
+    pins:               PinSpec list or dicts (fixed pins cost nothing per step; moving ones build a PinDriver)
+    wind:               None or Wind keyword arguments (velocity [m/s], coefficient, gust, gust_frequency)
+    stretch_limit:      None or StretchLimit keyword arguments (max_strain, iterations, tolerance, omega)
+    colliders:          collider specs (dicts, see taichi_cloth.colliders) or collision objects; resolved after
+                        every step, in order
+    self_collision:     False, True, or SelfCollision keyword arguments (thickness, friction): the cloth against its
+                        own triangles, resolved before the colliders
+    multilevel:         for a MultilevelCloth: SettleCriterion keyword arguments (max_speed, energy_change, window,
+                        max_time), refine ("global" = True, "local", or "none" = False), angle (local refinement:
+                        the dihedral angle [deg] that calls for it, default 20) and dt_growth (step multiplier per
+                        level below the finest; dt is the finest level's step; default 1)
+    sewing:             for a GarmentCloth: SewingOptions keyword arguments (close_speed, max_force, epsilon,
+                        energy_tolerance, gravity, join, join_stiffness, max_time)
+    body_morph:         weights (channel -> [-1, 1]), duration [s], start ([s] or "sewn"), blend (default: the
+                        shipped mannequin's BlendShapes): the scene's first mesh collider morphs during the run
+    fps:                frames per simulated second of Scene.run; every frame is filled with equal steps <= dt
+    precision:          "f32" or "f64" fields
+    step_guard:         what to do when an explicit integrator's dt exceeds its stable bound: warn | refuse | off
+    max_speed [m/s], max_strain [-]: beyond these (or at any NaN) a run is declared blown up
+    base_dir:           the folder relative collider mesh paths are read from
+    """
+    auto = _check_step_options(dt, adaptive, fps, step_guard)
+    source = _cloth_source(cloth, precision, multilevel, sewing, self_collision)
+    model = source.model
+    state = State(model)
+    parts_warnings: list[str] = []
+
+    specs = [p if isinstance(p, PinSpec) else PinSpec(**p) for p in pins] + source.pins
+    pin_control = None
+    if specs:
+        moving = [s for s in specs if s.path is not None]
+        capacity = max(sum(len(s.select(d.positions)) for s in moving) for d in source.levels) if moving else None
+        pin_control = Pins(model, state, specs, capacity)
+
+    wind_source = Wind(model, state, **wind) if wind is not None else None
+    objects = build_colliders(colliders, base_dir) if colliders else []
+    if self_collision:  # first, so that the body colliders have the last word on every position
+        from collision.self_collision import SelfCollision
+
+        options = self_collision if isinstance(self_collision, dict) else {}
+        objects.insert(0, SelfCollision(model.data.triangles, model.data.positions, **options))
+    collide = None
+    if objects:
+        state.contacts = Contacts(model)
+        collide = Colliders(model, state, objects, state.contacts)
+    sources = ([wind_source] if wind_source is not None else []) + (collide.repulsions if collide else [])
+    forces = ForceModel(model, state, gravity, air_damping, sources)
+    stepper = integrator_class(integrator)(model, state, forces, **(integrator_options or {}))
+    if getattr(stepper, "needs_levels", False):
+        _attach_levels(stepper, integrator, source, multilevel, specs)
+
+    if auto:
+        try:
+            options = AdaptiveOptions(**(adaptive or {}))
+            clock = AdaptiveStep(model, state, forces, type(stepper), fps, options,
+                                 collide.thickness if collide else None)
+        except TypeError:
+            unknown = sorted(set(adaptive) - set(AdaptiveOptions.keys()))
+            raise SceneError(f"adaptive has no option {unknown[0]!r} "
+                             f"(options: {', '.join(AdaptiveOptions.keys())})") from None
+        except ValueError as err:
+            raise SceneError(str(err)) from None
+    else:
+        clock = FixedStep(dt, fps)
+
+    limit = StretchLimit(model, state, **stretch_limit) if stretch_limit else None
+    sew = _sewing(model, state, forces, source.garment, sewing) if source.garment is not None else None
+    morph = _body_morph(body_morph, collide, sew, clock.dt) if body_morph is not None else None
+    refiner = None
+    if source.multilevel is not None:
+        refiner = _refiner(model, state, source.multilevel, multilevel, gravity)
+        clock.model_changed(refiner.dt_scale(refiner.level))
+    strain_map = None
+    if source.garment is not None:
+        from .strain import StrainMap
+
+        strain_map = StrainMap(model)
+
+    _check_step(step_guard, stepper, model, forces, clock, source, specs, refiner, parts_warnings)
+    controllers = [c for c in (refiner, morph, pin_control, sew, limit, collide, strain_map) if c is not None]
+    return SceneParts(name, model, state, forces, stepper, clock, controllers,
+                      wind_source.normals if wind_source is not None else None, parts_warnings,
+                      float(max_speed), float(max_strain))
+
+
+# ---------------------------------------------------------------------- the cloth source
+@dataclass
+class _Source:
+    """A cloth as the scene will run it: the model on its first level, every level it may reach (pins are
+    selected and the step guard checked on each), extra pins, and the cloth objects whose controllers it needs."""
+
+    model: Model
+    levels: list
+    pins: list
+    multilevel: object = None
+    garment: object = None
+
+
+def _cloth_source(cloth, precision: str, multilevel, sewing, self_collision) -> _Source:
+    from .garment.garment import GarmentCloth
+    from .multilevel_cloth import MultilevelCloth
+
+    if isinstance(cloth, MultilevelCloth):
+        if self_collision:
+            raise SceneError("self_collision is not supported on a multilevel cloth yet (its triangle grid would "
+                             "have to be rebuilt at every level switch)")
+        if sewing is not None:
+            raise SceneError("[sewing] needs a garment cloth (a garment file, or taichi_cloth.garment.build_garment)")
+        model = Model(cloth.levels[cloth.start_level], precision, capacity=cloth.capacity)
+        return _Source(model, list(cloth.levels), [], multilevel=cloth)
+    if multilevel is not None:
+        raise SceneError("[multilevel] needs a cloth built as a 4-8 hierarchy (ClothBuilder.multilevel_grid)")
+    if isinstance(cloth, GarmentCloth):
+        if self_collision:
+            raise SceneError("self_collision is not supported on a garment yet (merging the seams changes its "
+                             "triangles)")
+        model = Model(cloth.data, precision)
+        fixed = [PinSpec(near=cloth.fixed_targets)] if len(cloth.fixed) else []
+        return _Source(model, [cloth.data], fixed, garment=cloth)
+    if sewing is not None:
+        raise SceneError("[sewing] needs a garment cloth (a garment file, or taichi_cloth.garment.build_garment)")
+    model = cloth if isinstance(cloth, Model) else Model(cloth, precision)
+    return _Source(model, [model.data], [])
+
+
+# ---------------------------------------------------------------------- options and features
+def _check_step_options(dt, adaptive, fps, step_guard) -> bool:
+    """Validate the step options; True for dt = "auto"."""
+    auto = isinstance(dt, str)
+    if auto and dt != "auto":
+        raise SceneError(f"dt must be a positive number of seconds or 'auto', got {dt!r}")
+    number = isinstance(dt, (int, float)) and not isinstance(dt, bool)
+    if not auto and not (number and dt > 0 and math.isfinite(dt)):
+        raise SceneError(f"dt must be a positive number of seconds or 'auto', got {dt!r}")
+    if adaptive is not None and not auto:
+        raise SceneError(f"adaptive options need dt = 'auto' (got dt = {dt!r})")
+    if not (isinstance(fps, (int, float)) and fps > 0 and math.isfinite(fps)):
+        raise SceneError(f"fps must be > 0, got {fps}")
+    if step_guard not in STEP_GUARDS:
+        raise SceneError(f"step_guard must be one of {', '.join(STEP_GUARDS)}, got {step_guard!r}")
+    return auto
+
+
+def _attach_levels(stepper, integrator: str, source: _Source, multilevel, specs) -> None:
+    """Give a multigrid integrator the 4-8 levels of the cloth (global refinement only)."""
+    ml = source.multilevel
+    if ml is not None and (multilevel or {}).get("refine") == "local":
+        raise SceneError("multigrid_cycles needs the nested levels of global refinement, not refine = local")
+    if ml is None:
+        raise SceneError(f"integrator {integrator!r} with multigrid_cycles needs a multilevel cloth "
+                         "([multilevel] in a scene file, ClothBuilder.multilevel_grid in Python)")
+    stepper.attach_levels(ml.hierarchy.levels, ml.levels, [pinned_mask(specs, d.positions) for d in ml.levels],
+                          ml.start_level)
+
+
+def _sewing(model, state, forces, garment, options: dict | None):
+    from .garment.sewing import Sewing, SewingOptions
+
+    try:
+        return Sewing(model, state, forces, garment, SewingOptions(**(options or {})))
+    except (TypeError, ValueError) as err:
+        raise SceneError(f"sewing: {err}") from None
+
+
+def _refiner(model, state, cloth, options: dict | None, gravity):
+    from .refiner import Refiner, SettleCriterion
+
+    opts = dict(options or {})
+    refine, dt_growth, angle = opts.pop("refine", True), opts.pop("dt_growth", 1.0), opts.pop("angle", 20.0)
+    try:
+        return Refiner(model, state, state.contacts, cloth, SettleCriterion(**opts), refine, dt_growth, angle, gravity)
+    except (TypeError, ValueError) as err:
+        raise SceneError(f"multilevel: {err}") from None
+
+
+def _body_morph(options: dict, collide, sewing, dt: float):
+    """The MorphingBody of `body_morph` (see assemble): it drives the scene's first mesh collider, which must be
+    the blend shapes' base body; start "sewn" (the default for a garment) waits for the seams to be joined."""
+    from .body import BlendShapes
+    from .body.morphing import MorphingBody
+
+    opts = dict(options)
+    bodies = collide.bodies if collide is not None else []
+    if not bodies:
+        raise SceneError("body_morph needs a mesh collider (the body to morph), e.g. path = \"mannequin\"")
+    blend = opts.pop("blend", None) or BlendShapes.from_mannequin()
+    if bodies[0].n_vertices != len(blend.base):
+        raise SceneError(f"body_morph: the mesh collider {bodies[0].source!r} has {bodies[0].n_vertices} vertices, "
+                         f"the blend shapes' base body {len(blend.base)}: morph the body the scene collides with")
+    opts.setdefault("start", "sewn" if sewing is not None else 0.0)
+    index = collide.objects.index(bodies[0])
+    ready = (lambda: not sewing.active) if sewing is not None else None
+    try:
+        morph = MorphingBody(blend, collider=bodies[0], ready=ready, index=index, **opts)
+        morph.check_speed(dt)
+    except TypeError as err:
+        raise SceneError(f"body_morph: {err}") from None
+    collide.moving.add(index)
+    return morph
+
+
+def _check_step(guard: str, stepper, model, forces, clock, source: _Source, specs, refiner, notes: list) -> None:
+    """The step guard: an explicit integrator's step against its linear-theory bound on every level the scene may
+    run on (warn, refuse with a SceneError, or off)."""
+    if guard == "off":
+        return
+    cls, air = type(stepper), forces.air_damping_value
+    if refiner is None:
+        bound = stable_dt(cls, model, air)
+        candidates = [("", clock.step_for(bound) if clock.auto else clock.dt, bound)]
+    else:
+        candidates = []
+        for k, data in enumerate(source.levels):
+            bound = stable_dt(cls, model, air, omega=omega_max_bound(data, pinned_mask(specs, data.positions)))
+            candidates.append((f" on level {k + 1}", clock.step_for(bound) if clock.auto
+                               else clock.base * refiner.dt_scale(k), bound))
+    for where, dt, bound in candidates:
+        if bound is None or dt <= bound:
+            continue
+        msg = (f"dt = {dt:.3g} s exceeds the stable step {bound:.3g} s of integrator {stepper.name!r} on this "
+               f"cloth{where} (linear theory, see docs/integrators.md)")
+        if guard == "refuse":
+            raise SceneError(msg + "; lower dt or pick approx-implicit/implicit")
+        notes.append(msg)
+        warn(msg)
+        return
+
+
+__all__ = ["DEFAULT_INTEGRATOR", "STEP_GUARDS", "SceneParts", "assemble"]

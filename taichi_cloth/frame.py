@@ -1,0 +1,60 @@
+"""What a recorder is given: a scene's layout once (what does not change frame to frame) and a read-only snapshot
+of each recorded frame. Plain data (numpy arrays, numbers, strings): the recorder never sees a scene, a model or a
+controller, and a snapshot can be written to any viewer.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass
+class SceneLayout:
+    """A scene as it starts.
+
+    name:             the scene's name
+    topology_changes: the triangles may change during the run (a level switch, merged seams): they are logged on
+                      the timeline at every change instead of once
+    series:           scalar series path (under the cloth's metrics) -> series names: energy, level, seam gap...
+    colliders:        one description dict per collider (collision objects' describe(), plus "moving": the body
+                      moves during the run and its vertices arrive in the snapshots' `meshes`)
+    """
+
+    name: str
+    topology_changes: bool
+    series: dict = field(default_factory=dict)
+    colliders: list = field(default_factory=list)
+
+
+@dataclass
+class FrameSnapshot:
+    """One frame of a cloth, copied out of the fields (the simulation may go on while it is written).
+
+    frame:            frame index (0: the start)
+    t:                simulated time [s]
+    positions:        (P,3) float32 [m]
+    normals:          (P,3) float32 unit vertex normals, or None (a cloth without triangles)
+    triangles:        (T,3) int the current triangles; topology_version counts their changes since the start, so
+                      a recorder logs them only when the version differs from what it logged last
+    colors:           (P,4) uint8 RGBA vertex colours, or None (the cloth's own colour)
+    points:           name -> (N,3) float32 extra points [m] that move (e.g. "pins" moving along a path)
+    fixed_points:     name -> (N,3) float32 points [m] that stay where they are while the topology does (fixed
+                      pins): logged with the triangles
+    meshes:           collider index -> (V,3) float32 new vertex positions [m] of a body that moved
+    scalars:          series path -> a value or a list of values (e.g. "energy" -> [kinetic, potential, total] [J])
+    events:           (level, text) pairs: what happened since the last snapshot ("INFO", "WARN", "ERROR")
+    """
+
+    frame: int
+    t: float
+    positions: np.ndarray
+    normals: np.ndarray | None
+    triangles: np.ndarray
+    topology_version: int
+    colors: np.ndarray | None = None
+    points: dict = field(default_factory=dict)
+    fixed_points: dict = field(default_factory=dict)
+    meshes: dict = field(default_factory=dict)
+    scalars: dict = field(default_factory=dict)
+    events: list = field(default_factory=list)

@@ -1,0 +1,88 @@
+"""RunSummary: what one Scene.run did, and its text for a terminal."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from .diagnostics import Measurement
+
+
+@dataclass
+class RunSummary:
+    """What a run did. Times in seconds of wall clock unless named sim_.
+
+    dt: the step [s] the run started with; dt_min, dt_max: the smallest and largest step taken (they differ with
+    dt = "auto", on 4-8 levels with dt_growth, or when the frames were filled with shorter steps); steps_line: the
+    clock's line about them (None when every step was dt).
+    sim_time: simulated seconds of this run (from its start, not from t = 0).
+    wall_step: stepping and per-frame checks over frames 2.. (frame 1 compiles the kernels: first_frame_wall);
+    timed_steps, timed_sim: the steps and simulated seconds inside wall_step; wall_record: recorder calls, frames 2..
+    """
+
+    name: str
+    integrator: str
+    dt: float
+    auto: bool
+    n_particles: int
+    n_springs: int
+    frames: int = 0
+    steps: int = 0
+    sim_time: float = 0.0
+    wall_step: float = 0.0
+    timed_steps: int = 0
+    wall_record: float = 0.0
+    first_frame_wall: float = 0.0
+    final: Measurement | None = None
+    max_strain_seen: float = 0.0
+    stats: dict = field(default_factory=dict)
+    blowup: str | None = None
+    dt_min: float | None = None
+    dt_max: float | None = None
+    timed_sim: float = 0.0
+    steps_line: str | None = None
+    events: list[str] = field(default_factory=list)  # what happened on the way (seams joined, level switches...)
+    outputs: list[str] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+
+    @property
+    def steps_per_s(self) -> float:
+        return self.timed_steps / self.wall_step if self.wall_step > 0 else float("nan")
+
+    @property
+    def realtime_factor(self) -> float:
+        """Simulated seconds per wall second of stepping (> 1 is faster than real time)."""
+        return self.timed_sim / self.wall_step if self.wall_step > 0 else float("nan")
+
+    def took_step(self, dt: float) -> None:
+        """Count dt [s] into the range of steps taken."""
+        self.dt_min = dt if self.dt_min is None else min(self.dt_min, dt)
+        self.dt_max = dt if self.dt_max is None else max(self.dt_max, dt)
+
+    def format(self) -> str:
+        lines = [f"scene {self.name!r}: {self.n_particles} particles, {self.n_springs} springs, "
+                 f"integrator {self.integrator}, dt = {'auto' if self.auto else f'{self.dt:.3g} s'}",
+                 f"  ran {self.frames} frames, {self.steps} steps, {self.sim_time:.3f} s simulated"]
+        if self.steps_line is not None:
+            lines.append(f"  {self.steps_line}")
+        if self.wall_step > 0:
+            lines.append(f"  speed: {self.steps_per_s:,.0f} steps/s, {1e3 * self.wall_step / max(self.timed_steps, 1):.3f} "
+                         f"ms/step, {self.realtime_factor:.2f}x real time (frames 2..; frame 1 with compiles took "
+                         f"{self.first_frame_wall:.2f} s)")
+            if self.wall_record > 0:
+                lines.append(f"  recording: {1e3 * self.wall_record / max(self.frames - 1, 1):.2f} ms/frame, "
+                             f"{100 * self.wall_record / (self.wall_step + self.wall_record):.1f} % of the loop")
+        if self.final is not None:
+            f = self.final
+            lines.append(f"  energy: kinetic {f.kinetic:.4g} J, potential {f.potential:.4g} J "
+                         f"(elastic {f.elastic:.4g}, gravity {f.gravity:.4g}), total {f.total:.4g} J")
+            lines.append(f"  max strain: {100 * f.max_strain:.2f} % now, {100 * self.max_strain_seen:.2f} % peak; "
+                         f"max speed {f.max_speed:.3g} m/s")
+        for e in self.events:
+            lines.append(f"  {e}")
+        for k, v in self.stats.items():
+            lines.append(f"  {k}: {v:.4g}")
+        for w in self.warnings:
+            lines.append(f"  warning: {w}")
+        lines.append(f"  instability: {self.blowup or 'none detected'}")
+        for o in self.outputs:
+            lines.append(f"  wrote {o}")
+        return "\n".join(lines)
