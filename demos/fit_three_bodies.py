@@ -1,18 +1,20 @@
-"""One skirt on three bodies: the mannequin morphed to small, medium and large girths (seed 002 blend shapes,
+"""One skirt on three bodies: the mannequin morphed to small, medium and large girths (Zhang et al. 2017 blend shapes,
 taichi_cloth.body), the same two-panel skirt (demos/garments/skirt.toml: waist 72 cm, hips 100 cm) placed, sewn
 and draped on each, recorded side by side in one recording, with the per-piece area and strain table of each.
 
-    python demos/fit_three_bodies.py [--out DIR] [--frames N] [--morph before|during] [--arch cpu|gpu]
+    python demos/fit_three_bodies.py [--out DIR] [--frames N] [--morph before|during] [--quality Q] [--arch cpu|gpu]
 
 --morph before (default): each run starts on its fitted body. --morph during: each skirt is sewn on the shipped
 body, which then morphs to the fitted one over 1 s while the skirt drapes (the collision grid is rebuilt as it
 changes). Writes DIR/fit_three_bodies.rrd.
 """
-import argparse
 import tomllib
-from pathlib import Path
 
-DEMOS = Path(__file__).resolve().parent
+import taichi_cloth as tc
+from _common import GARMENTS, SCENES, arguments, ends, load, opened_with
+from taichi_cloth.body import default_body
+from taichi_cloth.garment.metrics import garment_quality
+
 #: girths [m] (tape measures) of the three bodies; the shipped mannequin measures waist 0.669, hips 0.955
 BODIES = {"small": {"waist": 0.62, "hips": 0.90}, "medium": {"waist": 0.67, "hips": 0.96},
           "large": {"waist": 0.71, "hips": 1.01}}  # at waist 0.74 the 0.72 m waistband cannot close
@@ -20,47 +22,31 @@ SPACING = 0.9  # [m] between the bodies in the viewer
 
 
 def main(argv=None) -> int:
-    from taichi_cloth.cli import EXIT_BAD_INPUT, add_run_arguments, rerun_command, run_scene_file
-    from taichi_cloth.errors import BlowUpError, MeshError, SceneError
-    from taichi_cloth.garment.metrics import garment_quality
-    from taichi_cloth.recorder import Recorder
-
-    parser = argparse.ArgumentParser(description=__doc__.strip().splitlines()[0])
-    add_run_arguments(parser)
-    parser.add_argument("--morph", choices=("before", "during"), default="before",
-                        help="morph the body before the run (default) or during the drape")
-    args = parser.parse_args(argv)
-    args.out = args.out or "out"
-    scene = tomllib.loads((DEMOS / "scenes" / "sew_skirt.toml").read_text(encoding="utf-8"))
-    scene["cloth"]["garment"] = str(DEMOS / "garments" / "skirt.toml")
-    scene["output"] = {"mesh": False}
+    args = arguments(__doc__, argv, extra=lambda p: p.add_argument(
+        "--morph", choices=("before", "during"), default="before",
+        help="morph the body before the run (default) or during the drape"))
+    tc.init(args.arch)
+    scene_file = tomllib.loads((SCENES / "sew_skirt.toml").read_text(encoding="utf-8"))
+    scene_file["cloth"]["garment"] = str(GARMENTS / "skirt.toml")
     if args.morph == "during":
-        scene["frames"] = max(scene["frames"], 180)  # sewing (~0.6 s), the 1 s morph, then some drape
-    rec = Recorder(Path(args.out) / "fit_three_bodies.rrd", recording_name="fit_three_bodies")
+        scene_file["frames"] = max(scene_file["frames"], 180)  # sewing (~0.6 s), the 1 s morph, then some drape
     tables = []
-    try:
+    with tc.Recorder(args.out / "fit_three_bodies.rrd", recording_name="fit_three_bodies") as rec:
         for k, (size, girths) in enumerate(BODIES.items()):
             print(f"--- {size} body: " + ", ".join(f"{g} {100 * v:.0f} cm" for g, v in girths.items()))
-            scene["name"] = f"skirt_{size}"
-            scene["body"] = dict(girths, morph=args.morph)
-            try:
-                _, loaded = run_scene_file(dict(scene), args, recorder=rec, entity=size,
-                                           translation=((k - 1) * SPACING, 0.0, 0.0))
-            except (SceneError, MeshError, BlowUpError) as exc:
-                print(f"error: {exc}")
-                return EXIT_BAD_INPUT
-            tables.append((size, girths, loaded.scene, garment_quality(loaded.scene)))
-    finally:
-        rec.close()
-
-    from taichi_cloth.body import default_body
+            loaded = load(dict(scene_file, name=f"skirt_{size}", body=dict(girths, morph=args.morph)), args)
+            scene = loaded.scene
+            summary = scene.run(loaded.frames, recorder=rec, entity=size, translation=((k - 1) * SPACING, 0.0, 0.0),
+                                progress=not args.no_progress)
+            print(summary.format())
+            tables.append((size, girths, scene, garment_quality(scene)))
 
     gauge = default_body()[1]  # measures any morph of the shipped mannequin
     print("\n| body | waist (target / measured) | hips (target / measured) | piece | area error | boundary error "
           "| max strain | mean strain | inside the body | largest seam gap |")
     print("|---|---|---|---|---|---|---|---|---|---|")
     for size, girths, sc, quality in tables:
-        body = sc.colliders[0].vertices_np
+        body = sc.controller("colliders").bodies[0].vertices_np
         measured = gauge.measure(body, names=list(girths))
         for j, p in enumerate(quality.pieces):
             head = (f"| {size} | {100 * girths['waist']:.1f} / {100 * measured['waist']:.1f} cm "
@@ -68,9 +54,9 @@ def main(argv=None) -> int:
             print(f"{head} | {p.name} | {100 * p.area_error:.2f} % | {100 * p.boundary_error:.2f} % "
                   f"| {100 * p.max_strain:.1f} % | {100 * p.mean_strain:.2f} % | "
                   f"{quality.penetrations if j == 0 else ''} | {f'{1e3 * quality.seam_gap_max:.1f} mm' if j == 0 else ''} |")
-    print(f"open the recording with:  {rerun_command()} {rec.path}")
+    print(opened_with(rec.path))
     return 0
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(ends(main))

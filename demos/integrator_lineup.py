@@ -2,9 +2,10 @@
 
     python demos/integrator_lineup.py [--out DIR] [--frames N] [--integrator NAME ...] [--dt H] [--arch cpu|gpu]
 
-Each integrator is logged under lineup/<name>, placed 1 m apart along x, with its energy and strain under
-metrics/lineup/<name>. The unconditionally stable ones use the scene's dt (or --dt); the explicit ones use
-0.9 x their stable step from linear theory (ALGORITHMS.md 1.4), since the scene's step would blow them up.
+Writes DIR/integrator_lineup.rrd: each integrator is logged under lineup/<name>, placed 1 m apart along x, with
+its energy and strain under metrics/lineup/<name>. The unconditionally stable ones use the scene's dt (or --dt);
+the explicit ones use 0.9 x their stable step from linear theory (docs/integrators.md), since the scene's step
+would blow them up.
 Prints one summary per integrator and a comparison table (wall time, steps, final shape vs implicit). The
 implicit run at the scene's step is the line-up's common yardstick, not ground truth: backward Euler damps a
 swing numerically at large steps, so a distance to it mixes both methods' errors.
@@ -20,6 +21,7 @@ SCENE = Path(__file__).resolve().parent / "scenes" / "lineup.toml"
 
 def main(argv=None) -> int:
     import taichi_cloth as tc
+    from taichi_cloth.cli import rerun_command
     from taichi_cloth.integrators import INTEGRATORS
 
     p = argparse.ArgumentParser(description=__doc__.strip().splitlines()[0])
@@ -37,7 +39,7 @@ def main(argv=None) -> int:
         tc.init(args.arch)
         out = Path(args.out)
         rows, finals = [], {}
-        with tc.Recorder(out / "lineup.rrd", recording_name="integrator line-up") as rec:
+        with tc.Recorder(out / "integrator_lineup.rrd", recording_name="integrator line-up") as rec:
             for k, name in enumerate(args.integrator):
                 cls = INTEGRATORS[name]
                 loaded = tc.load_scene(SCENE, integrator=name, frames=args.frames,
@@ -64,7 +66,7 @@ def main(argv=None) -> int:
     for name, dt, steps, wall, strain in rows:
         dist = f"{1e3 * np.abs(finals[name] - ref).max():.2f}" if ref is not None else "-"
         print(f"| {name} | {dt:.3g} | {steps} | {wall:.2f} | {100 * strain:.2f} % | {dist} |")
-    print(f"\nopen the recording with:  rerun {out / 'lineup.rrd'}")
+    print(f"\nopen the recording with:  {rerun_command()} {rec.path}")
     return 0
 
 

@@ -1,12 +1,27 @@
 """A cotton square dropped onto a ball, simulated on a coarse 4-8 level first and refined level by level
-(1 to 5) as the drape settles (demos/scenes/multilevel_drape.toml; seed 000 section 2.2).
+(1 to 5) as the drape settles (demos/scenes/multilevel_drape.toml; Hsiao 2006 section 2.2).
 
-    python demos/multilevel_drape.py [--out DIR] [--frames N] [--integrator NAME] [--dt H] [--arch cpu|gpu]
+    python demos/multilevel_drape.py [--out DIR] [--frames N] [--integrator NAME] [--dt H|auto] [--quality Q] [--arch cpu|gpu]
 
 Writes DIR/multilevel_drape.rrd: the mesh topology changes at each level switch (an event marks it) and
 metrics/cloth/level plots the level over time. Open it with `rerun DIR/multilevel_drape.rrd`.
 """
-from _common import run_demo
+import taichi_cloth as tc
+from _common import SCENES, arguments, ends, load, opened_with
+
+
+def main(argv=None) -> int:
+    args = arguments(__doc__, argv)
+    tc.init(args.arch)
+    loaded = load(SCENES / "multilevel_drape.toml", args)
+    scene = loaded.scene
+    with tc.Recorder(args.out / "multilevel_drape.rrd", recording_name="multilevel_drape") as rec:  # kept if the run blows up
+        summary = scene.run(loaded.frames, recorder=rec, progress=not args.no_progress)
+    summary.outputs += [str(scene.export_mesh(rec.path.with_suffix(suffix))) for suffix in (".obj", ".ply")]
+    print(summary.format())
+    print(opened_with(rec.path))
+    return 0
+
 
 if __name__ == "__main__":
-    raise SystemExit(run_demo("multilevel_drape.toml", __doc__))
+    raise SystemExit(ends(main))
