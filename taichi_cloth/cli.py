@@ -1,4 +1,4 @@
-"""Command line: `python -m taichi_cloth run|body|flatten|bench|info`. Demo scripts reuse `run_scene_file`."""
+"""Command line: `python -m taichi_cloth run|body|flatten|bench|info`."""
 from __future__ import annotations
 
 import argparse
@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 from .errors import BlowUpError, MeshError, PatternError, SceneError
+from .paths import free_stem
 from .quality import QUALITIES
 
 EXIT_BAD_INPUT = 2
@@ -36,15 +37,13 @@ def _step(text: str):
         raise argparse.ArgumentTypeError(f'must be a number of seconds or "auto", got {text!r}') from None
 
 
-def run_scene_file(scene_path, args, recorder=None, entity=None, translation=None, quiet=False):
-    """Load `scene_path` with the CLI overrides in `args`, run it, record it and export the final mesh.
+def run_scene_file(scene_path, args, quiet: bool = False):
+    """Load `scene_path` with the CLI overrides in `args`, run it, record it to OUT/NAME.rrd and export the final
+    mesh beside it (NAME-2, NAME-3... when an earlier run's files are there: nothing is overwritten).
 
-    Returns (summary, loaded scene). With an external `recorder` (several scenes in one recording) the
-    caller owns the recording; otherwise one is written to OUT/NAME.rrd. Raises SceneError/MeshError
-    for bad input and BlowUpError (with .summary) when the run goes unstable; the recording is kept.
-    """
+    Returns (summary, loaded scene). Raises SceneError/MeshError for bad input and BlowUpError (with .summary)
+    when the run goes unstable; the recording made so far is kept."""
     from . import runtime
-    from .recorder import Recorder
     from .scenefile import load_scene, parse_scene
 
     parse_scene(scene_path)  # bad files fail here, before Taichi starts
@@ -55,34 +54,37 @@ def run_scene_file(scene_path, args, recorder=None, entity=None, translation=Non
     scene, out = loaded.scene, Path(loaded.output["dir"])
     if loaded.config.get("_quality") is not None and not quiet:
         print(loaded.config["_quality"].describe())
-    own = recorder is None and loaded.output["record"]
-    rec = Recorder(out / f"{loaded.name}.rrd", recording_name=loaded.name) if own else recorder
+    suffixes = ([".rrd"] if loaded.output["record"] else []) + ([".obj", ".ply"] if loaded.output["mesh"] else [])
+    stem = free_stem(out, loaded.name, suffixes)
+    rec = None
+    if loaded.output["record"]:
+        from .recorder import Recorder
+
+        rec = Recorder(out / f"{stem}.rrd", recording_name=loaded.name, overwrite=True)
     summary = None
     try:
-        summary = scene.run(loaded.frames, recorder=rec, entity=entity, translation=translation,
-                            progress=not getattr(args, "no_progress", False),
+        summary = scene.run(loaded.frames, recorder=rec, progress=not getattr(args, "no_progress", False),
                             record_every=loaded.output["record_every"])
     except BlowUpError as err:
         summary = getattr(err, "summary", None)
         raise
     finally:
+        if rec is not None:
+            rec.close()
         if summary is not None:
-            if own:
+            if rec is not None:
                 summary.outputs.append(str(rec.path))
             if loaded.output["mesh"]:
                 out.mkdir(parents=True, exist_ok=True)
-                stem = loaded.name if entity is None else entity.replace("/", "_")
                 for suffix in (".obj", ".ply"):
                     summary.outputs.append(str(scene.export_mesh(out / f"{stem}{suffix}")))
-        if own:
-            rec.close()
     if not quiet:
         print(summary.format())
         if scene.controller("sewing") is not None:
             from .garment.metrics import garment_quality
 
             print(garment_quality(scene).format())
-        if own:
+        if rec is not None:
             print(f"open the recording with:  {rerun_command()} {rec.path}")
     return summary, loaded
 
@@ -110,7 +112,7 @@ def _cmd_run(args) -> int:
         summary = getattr(exc, "summary", None)
         if summary is not None:
             print(summary.format())
-        print(f"error: {exc}", file=sys.stderr)
+        print(f"error: {exc}; what was recorded is kept", file=sys.stderr)
         return EXIT_BLOWUP
     return 0
 
@@ -153,7 +155,7 @@ def _cmd_info(args) -> int:
     print(f"taichi {version}, numpy {numpy.__version__}, rerun-sdk {rerun.__version__}")
     print("integrators:")
     for name, cls in INTEGRATORS.items():
-        kind = "no step limit" if cls.unconditionally_stable else "explicit, step limited (ALGORITHMS.md 1.4)"
+        kind = "no step limit" if cls.unconditionally_stable else "explicit, step limited (docs/algorithms.md, step limits)"
         print(f"  {name:20s} {kind}")
         for opt_name, opt in cls.OPTIONS.items():
             print(f"      {opt_name} = {opt.default!r}: {opt.doc}")

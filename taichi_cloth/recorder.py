@@ -15,24 +15,13 @@ from pathlib import Path
 import numpy as np
 import rerun as rr
 
+from .paths import free_path
 from .strain import strain_colors
 
 CLOTH_COLOR = (200, 90, 60, 255)
 PIN_COLOR = (30, 30, 30, 255)
 BODY_COLOR = (170, 170, 180, 255)
 FLOOR_COLOR = (120, 140, 120, 255)
-
-
-def free_path(path: str | Path) -> Path:
-    """`path` if no file is there yet, else the first free `stem-2.suffix`, `stem-3.suffix`... beside it (runs never
-    overwrite an earlier recording)."""
-    path = Path(path)
-    k = 2
-    candidate = path
-    while candidate.exists():
-        candidate = path.with_name(f"{path.stem}-{k}{path.suffix}")
-        k += 1
-    return candidate
 
 
 def _quaternion_z_to(direction) -> list:

@@ -303,6 +303,7 @@ class Scene:
         except BlowUpError as err:
             summary.frames = frame
             summary.blowup = str(err)
+            summary.blowup_short = f"blew up by step {err.step} ({err.reason}); the error says what to change"
             err.summary = summary
             if recorder is not None:
                 recorder.log_events(entity, frame, self.state.t, self._collect(summary) + [("ERROR", str(err))])

@@ -34,7 +34,8 @@ class RunSummary:
     final: Measurement | None = None
     max_strain_seen: float = 0.0
     stats: dict = field(default_factory=dict)
-    blowup: str | None = None
+    blowup: str | None = None   # the BlowUpError's message, when the run blew up
+    blowup_short: str | None = None  # what the summary's instability line says of it
     dt_min: float | None = None
     dt_max: float | None = None
     timed_sim: float = 0.0
@@ -82,7 +83,7 @@ class RunSummary:
             lines.append(f"  {k}: {v:.4g}")
         for w in self.warnings:
             lines.append(f"  warning: {w}")
-        lines.append(f"  instability: {self.blowup or 'none detected'}")
+        lines.append(f"  instability: {(self.blowup_short or self.blowup) if self.blowup else 'none detected'}")
         for o in self.outputs:
             lines.append(f"  wrote {o}")
         return "\n".join(lines)
