@@ -1,8 +1,8 @@
-"""What each approx-implicit variant (ALGORITHMS.md 1.1b) does, measured against the implicit reference.
+"""What each approx-implicit variant (docs/algorithms.md, approximate implicit variants) does, measured against the implicit reference.
 
     python benchmarks/approx_implicit_variants.py [--out out/bench] [--arch cpu|gpu]
 
-For the seed form and each variant:
+For the published form and each variant:
   fall:   centre-of-mass drop of an unpinned 16x16 cotton sheet (1 m) after 0.25 s at h = 1/120 s, as a
           fraction of g t^2 / 2 (1.0 = free fall; implicit gives 1.03 from its O(h) lag);
   static: max distance [mm] to the implicit drape of a 10x10 cotton sheet (0.4 m) hanging from two corners,
@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 VARIANTS = [
-    ("seed (2 sweeps, from 0)", {}),
+    ("as published (2 sweeps, from 0)", {}),
     ("jv_term", {"jv_term": True}),
     ("8 sweeps + jv_term", {"sweeps": 8, "jv_term": True}),
     ("32 sweeps + jv_term", {"sweeps": 32, "jv_term": True}),

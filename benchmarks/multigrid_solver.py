@@ -1,4 +1,4 @@
-"""Multigrid over the 4-8 levels vs the seed's Jacobi sweeps vs Jacobi-preconditioned CG, on the stiff
+"""Multigrid over the 4-8 levels vs the paper's Jacobi sweeps vs Jacobi-preconditioned CG, on the stiff
 approximate-implicit system (M + h^2 L) dv = rhs (multilevel/multigrid.py).
 
     python benchmarks/multigrid_solver.py [--out out/bench] [--arch cpu|gpu] [--jacobi 300]
@@ -10,7 +10,7 @@ the smoothest mode there is) and a random rhs (standard normal, seed 0); unpinne
 (y = +0.5 m) pinned, and with only its two ends pinned (point pins: the hanging-cloth scene).
 
 Methods, all on the same matrix, from dv = 0:
-  * Jacobi: the seed smoother (omega = 1, the sweeps of approx_implicit.py), up to --jacobi sweeps;
+  * Jacobi: the paper's smoother (omega = 1, the sweeps of approx_implicit.py), up to --jacobi sweeps;
   * MG V(2,2): plain V-cycles (krylov=False; weighted Jacobi omega = 0.9, exact coarsest solve), float32
     and float64; also V(1,1), and V(2,2) with 50 Jacobi sweeps instead of the exact coarse solve;
   * MG-PCG: CG preconditioned by one V(2,2) cycle per iteration (the solver's default, krylov=True);
@@ -349,7 +349,7 @@ def main():
 
     f32, f64 = solver(ti.f32), solver(ti.f64)
     v11, cj = solver(ti.f32, pre_sweeps=1, post_sweeps=1), solver(ti.f32, coarse_sweeps=50)
-    methods = [("Jacobi (seed smoother, omega=1) f32", "jacobi", f32),
+    methods = [("Jacobi (the paper's smoother, omega=1) f32", "jacobi", f32),
                ("MG V(2,2) f32", "mg", f32), ("MG V(2,2) f64", "mg", f64), ("MG V(1,1) f32", "mg", v11),
                ("MG V(2,2), 50 coarse Jacobi sweeps f32", "mg", cj),
                ("MG-PCG V(2,2) f32 (default)", "mgpcg", f32), ("MG-PCG V(2,2) f64", "mgpcg", f64),
@@ -398,7 +398,7 @@ def main():
                     cells[0] = f"- (res {res[-1]:.3g} after {len(res) - 1})"
                     cells[2], cells[3] = f"{err:.2e}", frac
                 emit(f"| {run.label} | {run.unit_work:.2f} | " + " | ".join(cells) + f" | {per_iter:.3f} |")
-            # the seed itself: exactly two Jacobi sweeps from 0
+            # the paper's step itself: exactly two Jacobi sweeps from 0
             f32._bench_rhs.from_numpy(rhs_np.astype(np.float32))
             f32._bench_dv.fill(0)
             f32.jacobi(f32._bench_rhs, f32._bench_dv, H, 2)

@@ -1,8 +1,8 @@
-"""Collision (seed 000 section 2.3, seed 002 section 3.2.3, seed 004 eqs. 5 and 15).
+"""Collision (Hsiao 2006 section 2.3, Zhang et al. 2017 section 3.2.3, Fan et al. 1998 eqs. 5 and 15).
 
 - MeshCollider: a triangle body (the mannequin) binned in a VoxelGrid built by Taichi kernels, with fuzzy
   (mu-ranked) continuous particle-triangle tests, proximity contact and Coulomb friction;
-- PrimitiveColliders: spheres (seed 002's push-out), capsules and planes; mannequin_standin(): a sphere and
+- PrimitiveColliders: spheres (Zhang et al. 2017's push-out), capsules and planes; mannequin_standin(): a sphere and
   capsule body sized like the mannequin, for fast tests;
 - mannequin: the shipped CC0 body (mesh loading, validation and repair live in clothbase.meshes).
 

@@ -1,10 +1,10 @@
-"""Cloth particles against a triangle body: voxel grid + fuzzy-ranked continuous collision (seed 000 section 2.3).
+"""Cloth particles against a triangle body: voxel grid + fuzzy-ranked continuous collision (Hsiao 2006 section 2.3).
 
 Per step, each particle's motion segment p (start of step) -> q (after the integrator) gathers the triangles of
 the voxels its box (inflated by the thickness) touches. Each candidate gets the collision possibility
-mu = clamp(-(q - p).n / |q - p|, 0, 1) (ALGORITHMS.md 3), set to 0 when the motion cannot reach the face's plane
-this step; triangles it moves along or away from, or cannot reach (mu = 0), are never crossing-tested. The rest are tested with the seed 004 eq. (15) segment test:
-  mode "fuzzy" (the seed's): in descending mu, accept the first hit;
+mu = clamp(-(q - p).n / |q - p|, 0, 1) (docs/algorithms.md, collision), set to 0 when the motion cannot reach the face's plane
+this step; triangles it moves along or away from, or cannot reach (mu = 0), are never crossing-tested. The rest are tested with the Fan et al. 1998 eq. (15) segment test:
+  mode "fuzzy" (Hsiao 2006's): in descending mu, accept the first hit;
   mode "exact":              test every mu > 0 candidate and take the earliest hit.
 Whatever mu is, a proximity test keeps resting contact: a particle closer than the thickness to its nearest
 candidate face (closest point on the triangle, so edges and vertices count) is pushed away from that point
@@ -39,7 +39,7 @@ class MeshCollider(ParticleCollider):
     scanned unranked instead, and counted as overflows); passes: detection passes per step (a particle moved
     out of a crossing is checked again); reach_gate: also give mu = 0 to faces whose plane the motion cannot reach this step (off:
     the direction alone decides, for measuring what the gate saves); repulsion: None, or Repulsion keyword
-    arguments (stiffness, distance, max_force) to add seed 004's repulsion force.
+    arguments (stiffness, distance, max_force) to add Fan et al. 1998's repulsion force.
 
     Fields: vertices (V,) vec3 f32, triangles (T,) ivec3, normals (T,) unit vec3 f32, counters (6,) i64.
     """
@@ -199,7 +199,7 @@ class MeshCollider(ParticleCollider):
                     if hit and s < best_t:
                         best, best_t = t, s
         else:
-            # the seed's fuzzy order: repeatedly take the most likely untested candidate, stop at the first hit
+            # the published fuzzy order: repeatedly take the most likely untested candidate, stop at the first hit
             for _ in range(n):
                 kmax = -1
                 mu_max = 0.0
@@ -341,7 +341,7 @@ class MeshCollider(ParticleCollider):
 @ti.data_oriented
 class Repulsion:
     """Seed 004 eq. (5), f_r = c_r exp(1/D) N for D <= d, in a form that neither overflows nor jumps
-    (ALGORITHMS.md 3 warns that the published form is unit dependent, overflows float32 below 1.1 cm and is
+    (docs/algorithms.md, collision warns that the published form is unit dependent, overflows float32 below 1.1 cm and is
     discontinuous at d). Ours, with D the particle's distance to the nearest face of the body:
 
         f = min(max_force, stiffness (exp(d / max(D, d/10)) - e)) along the outward direction, for D < d

@@ -1,4 +1,4 @@
-"""Geometric tests as Taichi functions, inlined into the collision kernels (ALGORITHMS.md section 3)."""
+"""Geometric tests as Taichi functions, inlined into the collision kernels (docs/algorithms.md, collision)."""
 import taichi as ti
 
 #: barycentric slack so that hits exactly on an edge or a vertex are not lost between two triangles
@@ -51,7 +51,7 @@ def inside_triangle(x, a, b, c, n):
 
 @ti.func
 def collision_possibility(start_height, motion, n, reach_gate: ti.template()):
-    """The fuzzy collision possibility mu of seed 000 (our reconstruction; the seed's formula is garbled):
+    """The fuzzy collision possibility mu of Hsiao 2006 (our reconstruction: the published formula is illegible in the copy we have):
     how directly the motion heads into the face, clamp(-motion . n / |motion|, 0, 1), and 0 when the particle
     moves along or away from the face, does not move, or cannot reach the face's plane this step
     (start_height = (p - a) . n above it, and the motion descends less than that) when reach_gate is set."""

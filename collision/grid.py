@@ -1,6 +1,6 @@
 """A uniform voxel grid over a triangle mesh, built in Taichi kernels (count, prefix sum, fill).
 
-Each triangle is binned into every cell its bounding box, inflated by `pad`, overlaps (ALGORITHMS.md 3:
+Each triangle is binned into every cell its bounding box, inflated by `pad`, overlaps (docs/algorithms.md, collision:
 Teschner 2003 finds the best cell size near the mean primitive size). Dense mode covers the mesh's bounds
 plus `margin` with a fixed number of cells, so rebuilding after the mesh moves or morphs refills the same
 fields (no reallocation, no recompile) while the mesh stays within the allocated extent. Hashed mode

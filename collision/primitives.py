@@ -1,8 +1,8 @@
-"""Analytic colliders: spheres (seed 002), capsules and planes, for fast tests and a stand-in body.
+"""Analytic colliders: spheres (Zhang et al. 2017), capsules and planes, for fast tests and a stand-in body.
 
 Seed 002's rule for spheres: a particle collides when |S - C| <= r_sphere + r_particle and is pushed along
 (S - C) by alpha (r_sphere + r_particle - |S - C|), the pushes summed over all spheres (the norm is not
-squared; ALGORITHMS.md 0). We add what a stand-in body needs: capsules (the same rule about the closest
+squared; docs/algorithms.md). We add what a stand-in body needs: capsules (the same rule about the closest
 point of the axis), half-space planes (floors), a segment test so a particle that passes right through a
 sphere or capsule within one step is caught at its entry, and the body response of collision.body (inward
 normal velocity removed, Coulomb friction on the rest).
@@ -24,7 +24,7 @@ def _closest_on_segment(x, a, b):
 @ti.data_oriented
 class PrimitiveColliders(ParticleCollider):
     """spheres: list of (center (3,) [m], radius [m]); capsules: list of (a (3,), b (3,), radius); planes: list
-    of (point (3,), normal (3,)). thickness [m] is the particle radius r_p; alpha the seed's push fraction
+    of (point (3,), normal (3,)). thickness [m] is the particle radius r_p; alpha the paper's push fraction
     (1 = fully out); friction the Coulomb coefficient. Fields hold the shapes so they can move (set_*)."""
 
     def __init__(self, spheres=(), capsules=(), planes=(), thickness: float = 0.003, alpha: float = 1.0,
@@ -103,7 +103,7 @@ class PrimitiveColliders(ParticleCollider):
                     axis = _closest_on_segment(0.5 * (p + q), a, self.capsule_b[k])
                     q = self._entry(p, q, axis, self.capsule_a[k].w + rp)
                 push = ti.Vector.zero(ti.f32, 3)
-                for k in range(self.n_spheres):  # seed 002: pushes summed over all spheres
+                for k in range(self.n_spheres):  # Zhang et al. 2017: pushes summed over all spheres
                     c = self.sphere[k].xyz
                     reach = self.sphere[k].w + rp
                     d = q - c

@@ -1,4 +1,4 @@
-"""Multilevel 4-8 meshes (seed 000 section 2.2): the hierarchy, prolongation kernels, and the hierarchy as a
+"""Multilevel 4-8 meshes (Hsiao 2006 section 2.2): the hierarchy, prolongation kernels, and the hierarchy as a
 multigrid solver.
 
   hierarchy   the 4-8 hierarchy of a rectangle (base grid with alternating diagonals, bisection of every

@@ -1,4 +1,4 @@
-"""The 4-8 mesh hierarchy (seed 000 section 2.2; Velho and Zorin 2001; ALGORITHMS.md section 2).
+"""The 4-8 mesh hierarchy (Hsiao 2006 section 2.2; Velho and Zorin 2001; docs/algorithms.md, multilevel).
 
 A 4-8 mesh is made of right isosceles triangles whose vertices have valence 4 or 8 (inside). One
 refinement bisects every triangle across its hypotenuse, inserting the hypotenuse midpoint; the two
@@ -24,7 +24,7 @@ from clothbase.meshes import edges_of
 
 @dataclass
 class Level:
-    """One level of a hierarchy (index 0 = the base, the seed's level N = 1).
+    """One level of a hierarchy (index 0 = the base, Hsiao 2006's level N = 1).
 
     uv:        (n, 2) float64 [m]  rest (pattern) coordinates
     triangles: (t, 3) int64        (hyp_a, hyp_b, apex), counter-clockwise in uv

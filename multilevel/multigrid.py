@@ -1,4 +1,4 @@
-"""Geometric multigrid over the 4-8 levels for the approximate-implicit system (ALGORITHMS.md 1.1, 1.1b, 2).
+"""Geometric multigrid over the 4-8 levels for the approximate-implicit system (docs/algorithms.md).
 
 The system, per particle i and identical for the x, y and z components of dv:
 
@@ -70,7 +70,7 @@ class LevelOperator:
 
     mass:      (n,) float64 [kg]    lumped particle masses (> 0 on every unpinned particle)
     springs:   (s, 2) int64         particle indices (of this level) of each spring's two ends
-    stiffness: (s,) float64 [N/m]   spring constants k (the isotropic J~ of ALGORITHMS.md 1.1)
+    stiffness: (s,) float64 [N/m]   spring constants k (the isotropic J~ of docs/algorithms.md, approximate implicit step)
     pinned:    (n,) bool            True where dv = 0 (the row is left out of the system)
     """
 
@@ -398,7 +398,7 @@ class MultigridSolver:
         self._store(dv, off, n)
 
     def jacobi(self, rhs, dv, h: float, sweeps: int, omega: float = 1.0) -> None:
-        """The seed smoother alone on the active level: `sweeps` Jacobi sweeps (omega = 1: the sweeps of
+        """The paper's smoother alone on the active level: `sweeps` Jacobi sweeps (omega = 1: the sweeps of
         taichi_cloth.integrators.approx_implicit) from the initial guess in dv. For comparisons."""
         off, n = self._check(rhs, dv, h)
         self._load(rhs, dv, off, n)

@@ -1,4 +1,4 @@
-"""Multilevel meshes of an arbitrary 2D pattern outline (ALGORITHMS.md section 2, "Arbitrary outlines"; ours).
+"""Multilevel meshes of an arbitrary 2D pattern outline (docs/algorithms.md, multilevel, "Arbitrary outlines"; ours).
 
 At level L (0-based) the mesh has two parts:
 

@@ -1,13 +1,18 @@
 """taichi-cloth: mass-spring cloth on Taichi kernels.
 
 Life cycle: ClothBuilder -> ClothData -> Model (fields) -> State -> Integrator.step(dt), composed by a
-Scene (the only time loop), recorded by a Recorder. Units are SI throughout (m, kg, s, N).
+Scene (the only time loop, with the controllers a scene names), recorded by a Recorder. Units are SI throughout
+(m, kg, s, N).
 
     import taichi_cloth as tc
     tc.init("cpu")
-    scene = tc.load_scene("demos/scenes/hanging_cloth.toml").scene
-    scene.step(100)
-    x = scene.positions()
+    cloth = tc.ClothBuilder.grid((1.0, 1.0), (32, 32), "cotton", center=(0.0, 1.5, 0.0), plane="xz")
+    scene = tc.Scene(cloth, dt=1 / 120, pins=[{"near": [[-0.5, 1.5, -0.5], [0.5, 1.5, -0.5]]}])  # two corners
+    with tc.Recorder("out/my_cloth.rrd") as rec:
+        summary = scene.run(120, recorder=rec)   # 2 s at 60 frames per second
+    x = scene.positions()                        # (1024, 3) float64 [m]
+
+A scene file does the same from TOML: `tc.load_scene("demos/scenes/hanging_cloth.toml").scene`.
 """
 from .builder import ClothBuilder
 from .cloth import ClothData, SpringKind
@@ -25,7 +30,7 @@ __version__ = "0.1.0"
 
 
 def __getattr__(name: str):
-    # the recorder imports rerun: only when something records (PEP 562)
+    # the recorder imports rerun, which takes a while: only when something records (PEP 562)
     if name == "Recorder":
         from .recorder import Recorder
 

@@ -1,4 +1,4 @@
-"""Automatic time-step selection, `Scene(dt="auto")` (ALGORITHMS.md 1.4, "Adaptive step"; seed 004 cites
+"""Automatic time-step selection, `Scene(dt="auto")` (docs/algorithms.md, step limits, "Adaptive step"; Fan et al. 1998 cites
 Desbrun-Gascuel 1996).
 
 The rule, re-evaluated before every frame (and before every `Scene.step` call):
@@ -23,14 +23,17 @@ safety = 0.8 by default. The Gershgorin bound (the step guard's) is exact for a 
 the measured critical step on the sheets of `python -m taichi_cloth bench stability`, where every explicit
 integrator ran stable at the automatic step over k = 1e1..1e7 N/m and mass ratios 1..1e4. 0.8 keeps a 20 %
 margin where the bound is tight, for what the linear theory leaves out (stretched springs, collision and
-stretch-limit corrections, float32), at 1/0.8 = 1.25x the steps of the bound; ALGORITHMS.md's C ~ 0.5 would cost
+stretch-limit corrections, float32), at 1/0.8 = 1.25x the steps of the bound; the customary C ~ 0.5 would cost
 2x everywhere for a margin the rollback below provides anyway.
 
-Rollback (`rollback = True`, the default; in Scene.run, while Scene.step raises as before): the scene keeps a copy
+Rollback (`rollback = True`, the default; in Scene.run, while Scene.step raises as before): the clock keeps a copy
 of x and v at the start of every frame (two capacity-sized fields, allocated once). A frame that blows up anyway
 is rolled back, h is halved and capped there until the model changes, and the frame is run again; the run stops
 with the BlowUpError only when the halved step would fall below dt_min. Each rollback is an event in the run
-summary and the recording.
+summary and the recording. It is a copy, not a swap of two state buffers (warp.sim's state_in/state_out): a Taichi
+kernel binds the fields it reads when it compiles, so swapping buffers would compile every kernel of the scene twice
+and double the compile time of every run, where the copy costs one kernel launch per frame. A rollback does not
+undo what controllers did during the frame (a sewing ramp's shortened seams, a body morph's progress).
 """
 
 import math

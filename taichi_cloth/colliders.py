@@ -8,7 +8,7 @@ Spec keys (SI units):
                       (or "vertices": (V,3) [m] and "triangles": (T,3) arrays, "path" then only names it)
                       "cell_size": None (1.5 x mean edge), "mode": "fuzzy" | "exact",
                       "repulsion": None | {"stiffness": N, "distance": m, "max_force": N}}
-  {"type": "standin"}: seed 002's sphere-collider body, a sphere-and-capsule stand-in for the mannequin
+  {"type": "standin"}: Zhang et al. 2017's sphere-collider body, a sphere-and-capsule stand-in for the mannequin
   every type also takes "thickness" [m] (default 0.003) and "friction" (default 0.3).
 Analytic shapes with the same thickness and friction share one PrimitiveColliders (one kernel).
 `Colliders` is the scene's controller: every collider remembers where the particles start a step, and after the
@@ -103,6 +103,18 @@ class Colliders(Controller):
         """The thinnest collider's thickness [m] (None if none has one)."""
         values = [c.thickness for c in self.objects if getattr(c, "thickness", None)]
         return min(values) if values else None
+
+    @property
+    def stats(self) -> dict:
+        """The collision counters of the colliders that keep them (mesh bodies: candidate triangles, crossing
+        tests, crossings, proximity contacts...; self-collision: candidates, corrections), summed by name."""
+        out: dict[str, int] = {}
+        for c in self.objects:
+            if hasattr(c, "counter_values"):
+                for key, value in c.counter_values().items():
+                    name = f"{'self-collision' if c.describe()['kind'] == 'self' else 'collision'} {key}"
+                    out[name] = out.get(name, 0) + value
+        return out
 
     @property
     def bodies(self) -> list:

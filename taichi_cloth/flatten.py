@@ -1,4 +1,4 @@
-"""3D -> 2D flattening of a garment piece (seed 004 section 3.2) and its error metrics.
+"""3D -> 2D flattening of a garment piece (Fan et al. 1998 section 3.2) and its error metrics.
 
 A 3D piece (a draped garment piece, or any triangle mesh with disc topology) is flattened in three steps:
 
@@ -6,16 +6,16 @@ A 3D piece (a draped garment piece, or any triangle mesh with disc topology) is 
    nearest the piece's middle. Each new vertex is placed by trilateration from the two placed ends of the
    shared edge, with the triangle's 3D side lengths, on the side its winding asks for (so every triangle of
    a consistently wound disc lands counter-clockwise). One BFS wave is one vectorised numpy step.
-2. Planar spring relaxation with the engine's own mass-spring model, as the seed does ("the same model and
+2. Planar spring relaxation with the engine's own mass-spring model, as Fan et al. 1998 do ("the same model and
    computation, without gravity, sewing or collision forces"): one structural spring per triangle edge with the
    3D edge length as rest length (the isotropic constants of `taichi_cloth.cloth.mesh_cloth`), masses from the 3D
    areas, no bend springs (a planar sheet has nothing to bend). It runs the implicit (BW98) integrator in
    float64 quasi-statically: velocities are zeroed before every step, so each step is a Newton step on the
    elastic energy regularised by the mass matrix (h is set so that h^2 k / m ~ 1e3 on the stiffest particle).
-   It stops when the relative energy change of a step falls below `tolerance` (seed 004: "when the change of
+   It stops when the relative energy change of a step falls below `tolerance` (Fan et al. 1998: "when the change of
    the elastic energy between two iterations is below a given error"). All forces lie in the plane, so the
    piece stays at z = 0.
-3. Checks and metrics (seed 004 table 1, 3D values as the denominators): area error |S3 - S2| / S3, boundary
+3. Checks and metrics (Fan et al. 1998 table 1, 3D values as the denominators): area error |S3 - S2| / S3, boundary
    length error |L3 - L2| / L3, per-edge length error (l2 - l3) / l3 (the error map), flipped triangles
    (signed 2D area <= 0; none is allowed).
 
@@ -181,12 +181,12 @@ class FlatPiece:
 
     @property
     def area_error(self) -> float:
-        """|S3 - S2| / S3 (seed 004 table 1)."""
+        """|S3 - S2| / S3 (Fan et al. 1998 table 1)."""
         return abs(self.area_3d - self.area_2d) / self.area_3d
 
     @property
     def boundary_error(self) -> float:
-        """|L3 - L2| / L3 of the outline (seed 004 table 1)."""
+        """|L3 - L2| / L3 of the outline (Fan et al. 1998 table 1)."""
         return abs(self.boundary_3d - self.boundary_2d) / self.boundary_3d
 
     @property

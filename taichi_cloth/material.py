@@ -2,7 +2,7 @@
 
 A mass-spring sheet has no exact continuum equivalent, so the moduli below are the spring
 constants of a *square* grid; builders scale them by the local geometry so that refining a
-uniform mesh keeps the same sheet response (ALGORITHMS.md section 2, item 4):
+uniform mesh keeps the same sheet response (docs/algorithms.md, materials):
 
 - structural spring:  k = stretch * (attributed width / rest length)   -> `stretch` on a square grid
 - shear (diagonal):   k = shear * 2 * cell area / rest length^2         -> `shear` on a square grid

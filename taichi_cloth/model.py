@@ -165,7 +165,7 @@ class Model:
 
     def omega_max_bound(self) -> float:
         """Gershgorin upper bound [rad/s] on the highest linear frequency: sqrt(max_i 2 sum_j k_ij / m_i)
-        over free particles (ALGORITHMS.md 1.4). 0 if every particle is pinned."""
+        over free particles (docs/algorithms.md, step limits). 0 if every particle is pinned."""
         return omega_max_bound(self.data, self.pinned)
 
     def damping_ratio_max(self) -> float:

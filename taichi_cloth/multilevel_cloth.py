@@ -1,4 +1,4 @@
-"""A cloth on a multilevel 4-8 hierarchy (seed 000 section 2.2): one ClothData per level.
+"""A cloth on a multilevel 4-8 hierarchy (Hsiao 2006 section 2.2): one ClothData per level.
 
 Every level is built from the 2D rest (pattern) coordinates, never from a deformed shape:
 - springs: structural on the triangle legs, shear on the hypotenuses (the diamond diagonals), bend across

@@ -1,4 +1,4 @@
-"""Pins (seed 000 "fixed points"): particles held in place, or moved along a scripted path.
+"""Pins (Hsiao 2006 "fixed points"): particles held in place, or moved along a scripted path.
 
 Selection is a predicate on rest positions (indices, nearest-to-points, or a box), so it can be
 re-applied to a refined mesh. A fixed pin is just inverse mass 0 and costs nothing per step; only a

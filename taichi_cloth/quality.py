@@ -5,7 +5,7 @@ the implicit reference on the standard scenes and writes the cheapest configurat
 target into taichi_cloth/data/quality_presets.toml (shipped). A preset names:
   integrator, options     the integrator and its options (CG tolerance, sweeps ...)
   dt                      the step [s], or dt_bound_fraction: that fraction of an explicit integrator's
-                          linear-theory stable step on the scene's cloth (ALGORITHMS.md 1.4)
+                          linear-theory stable step on the scene's cloth (docs/algorithms.md, step limits)
   level                   4-8 levels relative to the finest the scene names: 0 keeps the cloth, -1 and -2
                           coarsen it by sqrt(2) and 2 in spacing ([multilevel] levels, or [cloth.grid]
                           resolution); a mesh or garment cloth keeps its mesh

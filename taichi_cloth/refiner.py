@@ -1,4 +1,4 @@
-"""Coarse-to-fine simulation (seed 000 section 2.2): run a coarse 4-8 level until the drape settles, then
+"""Coarse-to-fine simulation (Hsiao 2006 section 2.2): run a coarse 4-8 level until the drape settles, then
 switch to the next level, until the finest.
 
 A switch is a ModelChange (taichi_cloth.control) that the scene applies: the Model's fields (allocated at the

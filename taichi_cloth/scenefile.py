@@ -45,7 +45,7 @@ and a component whose table is absent is never built. The schema (units in brack
                                   # max_force [N]}) | "standin" (spheres and capsules for the mannequin);
                                   # all: thickness [m] = 0.003, friction = 0.3
     [multilevel]                  # a 4-8 hierarchy over [cloth.grid] (no resolution there): coarse first,
-    levels = 5                    # refined as the drape settles (seed 000 section 2.2); 1..8
+    levels = 5                    # refined as the drape settles (Hsiao 2006 section 2.2); 1..8
     base_cells = [4, 4]           # cells of level 1 (alternating diagonals); each level bisects every triangle
     start_level = 1               # the level the run starts on (levels: only the finest)
     refine = "global"             # "global" (every triangle), "local" (where the dihedral angle across a
@@ -61,7 +61,7 @@ and a component whose table is absent is never built. The schema (units in brack
                                   # epsilon [m] = 0.002 and energy_tolerance = 0.01 (when sewing stops), gravity =
                                   # false (while sewing), join = "merge" | "spring" | "none", join_stiffness [N/m],
                                   # max_time [s] = 10
-    [body]                        # morph the mannequin to measured girths [m] (taichi_cloth.body; seed 002):
+    [body]                        # morph the mannequin to measured girths [m] (taichi_cloth.body; Zhang et al. 2017):
     waist = 0.80                  # any of chest, underbust, waist, hips, neck, upper_arm, thigh (tape girths)
     morph = "before"              # "before": the run starts on the morphed body (a garment is placed on it);
                                   # "during": it starts on the shipped body and morphs over morph_time [s] = 1.0

@@ -1,4 +1,4 @@
-"""Step-size theory (ALGORITHMS.md 1.4): the largest stable step of an explicit integrator on a model.
+"""Step-size theory (docs/algorithms.md, step limits): the largest stable step of an explicit integrator on a model.
 
 omega_max is bounded by Gershgorin, sqrt(max_i 2 sum_j k_ij / m_i) over free particles (cheap, always
 valid, used by the engine); `omega_max_exact` computes it from the linearised stiffness at the rest

@@ -1,4 +1,4 @@
-"""Provot 1995 stretch limiting as a position correction after each step (ALGORITHMS.md 4.1).
+"""Provot 1995 stretch limiting as a position correction after each step (docs/algorithms.md, stretch limiting).
 
 For every limited spring longer than (1 + max_strain) L0, its endpoints move toward each other along
 the spring, in proportion to their inverse masses (a pinned end does not move). Parallel form: each

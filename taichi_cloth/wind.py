@@ -1,4 +1,4 @@
-"""Wind: a per-particle aerodynamic force along the surface normal (ALGORITHMS.md 4.2, our common form):
+"""Wind: a per-particle aerodynamic force along the surface normal (docs/algorithms.md, sewing, our common form):
 
     f_i = c_w * ((v_wind - v_i) . n_i) * n_i * A_i
 

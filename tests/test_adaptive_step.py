@@ -1,4 +1,4 @@
-"""The automatic step, Scene(dt="auto") (taichi_cloth.adaptive; ALGORITHMS.md 1.4 "Adaptive step").
+"""The automatic step, Scene(dt="auto") (taichi_cloth.adaptive; docs/algorithms.md, step limits "Adaptive step").
 
 An explicit integrator on auto runs stable where a frame-sized step blows up; its steps stay at or below
 safety x the stable bound and fill whole frames; the bound follows the model (set_stiffness, a 4-8 level switch);
@@ -96,6 +96,7 @@ def test_unconditionally_stable_integrators_take_one_step_per_frame():
     assert scene.substeps == 5 and scene.dt == pytest.approx(FRAME / 5)  # the largest step <= dt_max
 
 
+@pytest.mark.slow
 def test_fast_motion_near_a_collider_halves_the_step_and_calm_regrows_it():
     """A sheet falls onto a sphere with one implicit step per frame: at 1/60 s and ~1 m/s a particle moves
     17 mm per step, beyond half the 3 mm thickness, so the motion rule halves the step until it is not; once

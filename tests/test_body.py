@@ -1,4 +1,4 @@
-"""Body morphing to measured girths (taichi_cloth.body, seed 002 sections 1 and 3.1): the periodic-spline girth,
+"""Body morphing to measured girths (taichi_cloth.body, Zhang et al. 2017 sections 1 and 3.1): the periodic-spline girth,
 blend shapes (exact limits, user meshes, topology checks), the girth gauge on the shipped mannequin, the
 coupled fit and the `body` command."""
 import argparse

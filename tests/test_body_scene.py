@@ -73,6 +73,7 @@ def sewn_skirt(body_morph=None):
                     sewing=dict(energy_tolerance=0.05), body_morph=body_morph)
 
 
+@pytest.mark.slow
 def test_skirt_follows_a_body_that_grows_during_the_drape():
     blend, gauge = default_body()
     base_girths = gauge.measure(blend.base, names=["waist", "hips"])

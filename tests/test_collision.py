@@ -80,7 +80,7 @@ def test_fast_particle_does_not_tunnel_through_a_triangle_fan(where):
 
 
 def test_fast_particle_does_not_tunnel_through_a_sphere():
-    """The seed's sphere push-out alone would miss a particle that jumps right through: the entry test stops it."""
+    """The paper's sphere push-out alone would miss a particle that jumps right through: the entry test stops it."""
     spheres = PrimitiveColliders(spheres=[([0.0, 0.0, 0.0], 0.05)], thickness=0.002, friction=0.0)
     sc = particle_scene([0.0, 0.2, 0.0], [0.0, -15.0, 0.0], [spheres])  # 15 cm per step through a 10 cm ball
     sc.step(3)
@@ -138,6 +138,7 @@ def drop_cloth(integrator, colliders, n=12, size=0.5, center=(0.0, 0.8, 0.0), v0
     return sc
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("integrator", INTEGRATORS)
 def test_no_penetration_sphere_box_mannequin(integrator, quiet):
     """A sheet thrown down at 1 m/s onto a sphere (analytic), a box (mesh) and the mannequin (mesh) ends with
@@ -162,6 +163,7 @@ def test_no_penetration_sphere_box_mannequin(integrator, quiet):
     assert d.min() >= -5e-4 and d.min() < 0.01
 
 
+@pytest.mark.slow
 def test_resting_contact_does_not_jitter():
     """Cloth settled on the floor: over the next half second nothing moves by more than 0.1 mm."""
     floor = PrimitiveColliders(planes=[([0.0, 0.0, 0.0], [0.0, 1.0, 0.0])], thickness=0.003, friction=0.5)
@@ -178,6 +180,7 @@ def test_resting_contact_does_not_jitter():
     np.testing.assert_allclose(sc.positions()[:, 1], 0.003, atol=1e-6)
 
 
+@pytest.mark.slow
 def test_fuzzy_ranking_finds_the_same_contacts_with_fewer_tests():
     """On a drape resting on the mannequin's shoulders, one step from the same state resolves to the same
     positions in fuzzy (seed) and exact mode, and the fuzzy mode crossing-tests at least 3x fewer triangles than
@@ -215,6 +218,7 @@ def test_broken_body_meshes_are_refused_or_repaired():
         tc.Scene(tc.ClothBuilder.grid((0.2, 0.2), (4, 4)), colliders=[{"type": "mesh", "path": "nope.obj"}])
 
 
+@pytest.mark.slow
 def test_implicit_solves_respect_contacts_no_stretch_around_a_small_ball():
     """Without the BW98 contact filter the implicit solve dragged held particles into the body every step and the
     cloth stretched 30-690 % around a 10 cm ball at h = 1/120 s; with it the strain stays at a few per cent.
@@ -229,6 +233,7 @@ def test_implicit_solves_respect_contacts_no_stretch_around_a_small_ball():
     assert np.linalg.norm(sc.state.contacts.normal.to_numpy(), axis=1).max() == pytest.approx(1.0, abs=1e-5)
 
 
+@pytest.mark.slow
 def test_repulsion_force_is_bounded_continuous_and_outward():
     """Seed 004's repulsion in our form: 0 at and beyond the distance d, stiffness (e^(d/D) - e) inside,
     max_force from D = d/10 down, along the outward normal."""
@@ -252,6 +257,7 @@ def test_repulsion_force_is_bounded_continuous_and_outward():
     np.testing.assert_allclose(forces[:, 1], expected, rtol=1e-3, atol=1e-9)
 
 
+@pytest.mark.slow
 def test_self_collision_keeps_a_folded_towel_in_two_layers():
     """A towel on the floor gets one edge carried over onto the other half (a keyframed pin). Without
     self-collision the folded half sinks through into the floor layer; with it, it rests on the bottom half."""
@@ -277,6 +283,7 @@ def test_self_collision_keeps_a_folded_towel_in_two_layers():
     assert sc.controller("colliders").objects[0].counter_values()["corrections"] > 0
 
 
+@pytest.mark.slow
 def test_standin_approximates_the_mannequin():
     """The sphere-and-capsule stand-in lies mostly inside the mannequin and fills most of it."""
     from collision import mannequin_standin

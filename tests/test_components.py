@@ -1,4 +1,5 @@
 """A scene builds and compiles only what it names; changing a parameter never recompiles."""
+import pytest
 import taichi as ti
 
 import taichi_cloth as tc
@@ -49,6 +50,7 @@ def test_changing_parameters_does_not_recompile():
     assert cc.total == 0, cc.compiled
 
 
+@pytest.mark.slow
 def test_field_blocks_of_dead_owners_are_recycled():
     """Taichi crashes after ~500 SNode trees; blocks of collected owners are destroyed before that happens."""
     import gc

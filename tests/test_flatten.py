@@ -1,4 +1,4 @@
-"""3D -> 2D flattening (seed 004 section 3.2): developable pieces exactly, doubly curved ones with finite errors
+"""3D -> 2D flattening (Fan et al. 1998 section 3.2): developable pieces exactly, doubly curved ones with finite errors
 that grow with the curvature, flat pieces unchanged, and clear errors for meshes that are not discs."""
 import numpy as np
 import pytest
@@ -62,6 +62,7 @@ def test_flat_piece_round_trips(disc):
     np.testing.assert_array_equal(np.sort(piece.boundary), np.sort(loop))
 
 
+@pytest.mark.slow
 def test_sphere_caps_have_finite_errors_that_grow_with_the_cap_angle(disc):
     uv, tri, _ = disc
     angles = [0.25, 0.5, 0.75, 1.0]  # polar angle of the rim [rad]

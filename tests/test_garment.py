@@ -1,5 +1,5 @@
 """Garments: seam pairing, sewing two flat squares, garment-file errors, DXF-sourced garments, and a skirt sewn
-onto the mannequin (seeds 003, 004; ALGORITHMS.md 4.2)."""
+onto the mannequin (Chen 2013; Fan et al. 1998; docs/algorithms.md, sewing)."""
 from pathlib import Path
 
 import numpy as np
@@ -179,9 +179,10 @@ def test_dxf_round_trip_of_a_generated_garment(tmp_path, body):
         assert load_garment(GARMENTS / f"{name}_dxf.toml").spacing == load_garment(GARMENTS / f"{name}.toml").spacing
 
 
+@pytest.mark.slow
 def test_skirt_sews_onto_the_mannequin(body):
     """The shipped skirt (at 3 cm spacing to keep the test short): every seam closes, no particle ends inside the
-    body, and the per-piece area error between pattern and drape stays under 3 % (seed 004 reports 0.3-2.6 %)."""
+    body, and the per-piece area error between pattern and drape stays under 3 % (Fan et al. 1998 reports 0.3-2.6 %)."""
     spec = load_garment(GARMENTS / "skirt.toml")
     spec.spacing = 0.03
     g = build_garment(spec, body)
@@ -255,6 +256,7 @@ def test_multilevel_meshing_keeps_seams_paired_on_every_level():
         assert counts == [6, 6, 11]  # 5 intervals at 0.04 m, then 10 at 0.02 m (4-8: 2**(L // 2))
 
 
+@pytest.mark.slow
 def test_fixed_points_hold_while_the_rest_falls():
     from taichi_cloth.garment.garment import FixedPoint
 

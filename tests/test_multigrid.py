@@ -202,8 +202,8 @@ def test_a_coarser_active_level_solves_that_level(f64):
     case.restore()
 
 
-def test_jacobi_is_the_seed_smoother(f32):
-    """Two sweeps from 0 with omega = 1 give the seed's dv_i = (rhs_i + h^2 sum_j k_ij dv~_j) / (m_i + h^2 sum_j k_ij),
+def test_jacobi_is_the_papers_smoother(f32):
+    """Two sweeps from 0 with omega = 1 give the paper's dv_i = (rhs_i + h^2 sum_j k_ij dv~_j) / (m_i + h^2 sum_j k_ij),
     dv~ = rhs / diag."""
     case, h = f32, 1 / 120
     case.restore()

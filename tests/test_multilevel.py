@@ -170,6 +170,7 @@ def test_a_scene_without_multilevel_builds_none_of_it():
         tc.Scene(tc.ClothBuilder.grid((0.5, 0.5), (6, 6)), multilevel={})
 
 
+@pytest.mark.slow
 def test_coarse_to_fine_drape_ends_where_the_fine_drape_does():
     """A cloth held by one edge, released horizontally, swings down: refined from level 1 to level 4 as it
     settles, its rest shape is within 1 % of the cloth size of the same cloth run at level 4 from the start.
@@ -237,8 +238,9 @@ max_time = 0.2
             load_scene(path)
 
 
+@pytest.mark.slow
 def test_multigrid_option_lets_a_stiff_sheet_fall_like_backward_euler_and_survives_switches():
-    """The seed's two sweeps let a stiff unpinned sheet fall a few mm in 0.25 s; V-cycle-preconditioned CG
+    """The paper's two sweeps let a stiff unpinned sheet fall a few mm in 0.25 s; V-cycle-preconditioned CG
     over the 4-8 levels solves the same step's system and falls as backward Euler does (g h^2 n (n + 1) / 2)."""
     mat = tc.Material(density=0.2, stretch=2000.0, shear=0.0, bend=0.0)
     h, n = 1 / 120, 30
@@ -272,6 +274,7 @@ def test_multigrid_option_lets_a_stiff_sheet_fall_like_backward_euler_and_surviv
                  integrator_options={"multigrid_cycles": 2})
 
 
+@pytest.mark.slow
 def test_an_outline_hierarchy_drapes_through_its_levels_with_its_mass():
     """A pattern piece with a curved outline (multilevel.outline): every level carries the same mass, and a
     switch places each new particle by the level's prolongation table (barycentric inside, arc midpoints on
@@ -296,6 +299,7 @@ def test_an_outline_hierarchy_drapes_through_its_levels_with_its_mass():
         assert sc.check().max_strain < 0.05
 
 
+@pytest.mark.slow
 def test_local_refinement_follows_the_drape_and_stays_conforming():
     """refine = "local": only triangles bent by more than `angle` across their hypotenuse, or touching the
     ball, are bisected (with the 4-8 forced splits). The mesh stays conforming, keeps its mass, ends with

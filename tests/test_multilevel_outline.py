@@ -1,4 +1,4 @@
-"""Multilevel meshes of arbitrary pattern outlines (multilevel.outline; ALGORITHMS.md section 2, "Arbitrary outlines").
+"""Multilevel meshes of arbitrary pattern outlines (multilevel.outline; docs/algorithms.md, multilevel, "Arbitrary outlines").
 
 Pure numpy: nothing here touches Taichi.
 """

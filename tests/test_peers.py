@@ -25,6 +25,8 @@ from taichi_cloth.bench.accuracy import run_sampled
 from taichi_cloth.bench.peer_taichi_example import (ExamplePhysics, ExampleUnavailable, TaichiExample, example_path,
                                                     headless_source, run_example)
 
+pytestmark = pytest.mark.slow  # each runs Taichi's example and our engine against a reference (tens of seconds)
+
 N = 12
 DTS = (5e-5, 2.5e-5)  # [s] below our stable step at n = 12 (6.7e-5 s: the dashpots dominate)
 FREE_TIMES = np.linspace(0.005, 0.1, 20)  # [s] before contact (the sheet meets the ball near t = 0.16 s)

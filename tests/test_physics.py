@@ -31,7 +31,7 @@ def test_free_fall_matches_g_t2_over_2(integrator):
     np.testing.assert_allclose(drop, 0.5 * G * t * t + lag, rtol=1e-9, atol=1e-12)
 
 
-def test_approx_implicit_first_step_is_the_seed_formula():
+def test_approx_implicit_first_step_is_the_published_formula():
     """Seed 000 eq. (2) for a uniform field: an interior particle whose neighbours all have its K and m gets
     dv = h g (1 - r^2), r = h^2 K / (m + h^2 K), exactly."""
     n, dt = 16, 1.0 / 120
@@ -44,6 +44,7 @@ def test_approx_implicit_first_step_is_the_seed_formula():
     assert sc.velocities()[i, 1] == pytest.approx(-G * dt * (1 - r * r), rel=1e-12)
 
 
+@pytest.mark.slow
 def test_approx_implicit_slows_free_fall_but_not_when_soft():
     """The documented weakness: a stiff sheet falls at a small fraction of g; with soft springs and a small
     step (r -> 0) the filter disappears and the fall is g again."""
@@ -64,6 +65,7 @@ def test_approx_implicit_slows_free_fall_but_not_when_soft():
         assert fall_ratio("cotton", 1.0 / 120, 30, warm_start=True) > 5 * stiff
 
 
+@pytest.mark.slow
 def test_approx_implicit_statics_match_implicit_and_warm_start_blows_up_cleanly(quiet):
     """Statics stay right: approx-implicit (with the h J v term, which converges) ends on the implicit drape.
     The warm-start variant goes unstable on the same cloth, and the engine stops it with a clean report."""
@@ -79,11 +81,12 @@ def test_approx_implicit_statics_match_implicit_and_warm_start_blows_up_cleanly(
     for opts in ({"jv_term": True}, {"sweeps": 8, "jv_term": True}):
         assert np.abs(hang("approx-implicit", **opts).positions() - ref).max() < 1e-4  # m, on a 0.4 m sheet
     seed = hang("approx-implicit").positions()
-    assert np.abs(seed - ref).max() < 2e-3  # the seed form has not fully settled after 6 s, but is close
+    assert np.abs(seed - ref).max() < 2e-3  # the published form has not fully settled after 6 s, but is close
     with pytest.raises(tc.BlowUpError, match="approx-implicit.*suggested"):
         hang("approx-implicit", warm_start=True)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("integrator", EXPLICIT)
 def test_undamped_explicit_conserves_energy(integrator):
     """No damping, tiny step: the symplectic/two-level schemes keep the total energy of a swinging cloth."""
@@ -98,6 +101,7 @@ def test_undamped_explicit_conserves_energy(integrator):
     assert drift < 2e-3 * swing
 
 
+@pytest.mark.slow
 def test_hanging_cloth_reaches_static_equilibrium():
     n = 10
     cloth = sheet(n, 0.4, plane="xy")
@@ -135,6 +139,7 @@ def test_agrees_with_implicit_reference_at_small_steps(integrator, swing_referen
     assert np.abs(swing(integrator, 1e-4) - swing_reference).max() < 1e-3
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("integrator", ["approx-implicit", "implicit"])
 def test_error_against_the_reference_falls_with_the_step(integrator, swing_reference):
     """Convergence: the distance to the reference shrinks as h shrinks toward the reference's step."""
@@ -142,6 +147,7 @@ def test_error_against_the_reference_falls_with_the_step(integrator, swing_refer
     assert errors[1] < 0.6 * errors[0]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("integrator,dt,steps", [("implicit", 0.05, 300), ("approx-implicit", 0.01, 4000)])
 def test_spring_chain_static_sag_is_analytic(integrator, dt, steps):
     """A vertical chain of N masses hangs with spring i stretched by (weight below it) / k."""
@@ -155,6 +161,7 @@ def test_spring_chain_static_sag_is_analytic(integrator, dt, steps):
     np.testing.assert_allclose(sc.positions()[:, 1], y_exact, atol=1e-7)
 
 
+@pytest.mark.slow
 def test_stretch_limit_holds_the_limit():
     """A very soft sheet sags far beyond 10 % strain; with Provot limiting at 10 % it stays at the limit
     (within the limiter's tolerance), and a few fixed passes alone would not be enough."""

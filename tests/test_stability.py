@@ -1,13 +1,13 @@
 """Stability at the extremes: stiffness 1e1..1e7 N/m, steps 1e-5..1e-1 s, mass ratios 1..1e4.
 
-The explicit schemes must run stable wherever their closed-form damped condition (ALGORITHMS.md 1.4,
+The explicit schemes must run stable wherever their closed-form damped condition (docs/algorithms.md, step limits,
 evaluated at the exact highest linear frequency) says so with a 10 % margin, and must be stopped with a
 clean BlowUpError where the step is 1.5 x beyond it. The two implicit schemes must stay finite
 everywhere (with a little damping). Nothing may ever produce NaN silently. One scene per integrator and
 mass ratio is reused across the sweep (stiffness written to a field, dt passed as an argument), so the
 whole sweep compiles each kernel once (taichi_cloth.bench.probes.probe_scene, shared with `bench stability`).
 
-Where the theory is exact (a 1D chain, ALGORITHMS.md 5) the critical step measured by bisection matches the
+Where the theory is exact (a 1D chain, docs/algorithms.md) the critical step measured by bisection matches the
 closed forms: sqrt(m/k) within 1 % undamped, 2/omega_max closer still, and the damped variants' conditions.
 """
 import math
@@ -44,6 +44,7 @@ def assert_nan_is_reported(scene):
         assert e.suggested_dt <= scene.stable_dt
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("mass_ratio", [1.0, 1e4])
 @pytest.mark.parametrize("integrator", ["explicit", "verlet", "central-difference"])
 def test_explicit_schemes_follow_their_stability_bound(integrator, mass_ratio):
@@ -78,6 +79,7 @@ def test_explicit_schemes_follow_their_stability_bound(integrator, mass_ratio):
     assert_nan_is_reported(scene)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("mass_ratio", [1.0, 1e2, 1e4])
 @pytest.mark.parametrize("integrator", ["approx-implicit", "implicit"])
 def test_implicit_schemes_stay_finite_over_the_whole_sweep(integrator, mass_ratio):
@@ -114,7 +116,7 @@ def test_step_guard_refuses_or_warns(quiet):
 
 
 # ---------------------------------------------------------------------- where the theory is exact: a 1D chain
-CHAIN_N, CHAIN_M, CHAIN_K = 50, 1.0, 100.0  # ALGORITHMS.md 1.4: omega_max = 19.990 rad/s, sqrt(m/k) = 0.1 s
+CHAIN_N, CHAIN_M, CHAIN_K = 50, 1.0, 100.0  # docs/algorithms.md, step limits: omega_max = 19.990 rad/s, sqrt(m/k) = 0.1 s
 
 
 def chain_scene(integrator: str, air_damping: float):
@@ -125,10 +127,11 @@ def chain_scene(integrator: str, air_damping: float):
                     step_guard="off", precision="f64")
 
 
+@pytest.mark.slow
 def test_chain_critical_step_of_symplectic_euler_is_sqrt_m_over_k():
     scene = chain_scene("explicit", 0.0)
     omega = omega_max_exact(scene.model)
-    assert omega == pytest.approx(19.990, abs=5e-4)  # the number ALGORITHMS.md quotes
+    assert omega == pytest.approx(19.990, abs=5e-4)  # the number docs/algorithms.md quotes
     # bisection between 0.9 and 1.1 x sqrt(m/k): runs of 2000 steps from the highest mode, "grows" = its
     # displacement passes 1000 x the start (a bounded run near the limit peaks at ~1/sqrt(2 (1 - h w / 2)))
     h = critical_step(scene, 0.09, 0.11, rel_tol=1e-5)
@@ -137,9 +140,10 @@ def test_chain_critical_step_of_symplectic_euler_is_sqrt_m_over_k():
     assert abs(h / exact - 1) < 1e-4 < abs(h / math.sqrt(CHAIN_M / CHAIN_K) - 1)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("integrator", ["explicit", "verlet", "central-difference"])
 def test_chain_critical_step_with_air_drag_matches_the_closed_form(integrator):
-    """gamma = 2 1/s (hw ~ 2 at h ~ 0.1 s: the drag term matters). Closed forms (ALGORITHMS.md 1.4):
+    """gamma = 2 1/s (hw ~ 2 at h ~ 0.1 s: the drag term matters). Closed forms (docs/algorithms.md, step limits):
     symplectic Euler h^2 w^2 + 2 h gamma < 4 (4.9 % below 2/w), Verlet h w < sqrt(4 - 2 c_d) with
     c_d = 1 - exp(-gamma h) (4.5 % below), central difference 2/w whatever gamma."""
     gamma = 2.0

@@ -11,6 +11,8 @@ from taichi_cloth.bench.accuracy import Trajectory, compare, pareto_front, surfa
 from taichi_cloth.integrators import INTEGRATORS
 from taichi_cloth.quality import load_presets
 
+pytestmark = pytest.mark.slow  # each builds a small trade-off study against an implicit reference (tens of seconds)
+
 STEPS = (1 / 30, 1 / 60, 1 / 120)
 FRACTIONS = (0.9, 0.3)
 

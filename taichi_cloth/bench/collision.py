@@ -7,7 +7,7 @@ settling period the benchmark records K consecutive steps (start and end positio
 replays exactly those steps through mesh colliders of several voxel sizes and modes, so every
 configuration sees the same motion. Reported per configuration: grid build time, triangle-cell pairs,
 collision ms per step, candidates per query (= triangle tests if every triangle of the touched voxels
-were tested), crossing tests per query (fuzzy seed mode; exact mode; fuzzy without the reach gate), the
+were tested), crossing tests per query (fuzzy mode as published; exact mode; fuzzy without the reach gate), the
 ratio candidates / fuzzy tests, and the integrator's ms per step on the same scene for comparison
 (implicit, and approx-implicit). Writes collision.md, collision.csv and collision.png to --out.
 """

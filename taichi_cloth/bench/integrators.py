@@ -3,7 +3,7 @@
 On square grids: ms per step, compile time, and wall time per simulated second of a hanging cloth at each
 integrator's largest stable step.
 
-"Largest stable step": 0.9 x the linear-theory bound for the explicit family (ALGORITHMS.md 1.4);
+"Largest stable step": 0.9 x the linear-theory bound for the explicit family (docs/algorithms.md, step limits);
 1/60 s (one step per displayed frame) for the unconditionally stable ones. Times are wall clock after a
 warm-up; the real-time factor is simulated seconds per wall second. Results: a table on stdout, plus
 bench.csv, bench.md and bench.png in --out. Never asserted in tests: speed is measured, not tested.

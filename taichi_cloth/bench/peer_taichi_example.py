@@ -29,7 +29,7 @@ Differences that cannot be removed (and what they cost, measured in tests/test_p
     (a difference of order drag dt per step: 1e-4 relative at our steps).
   - the ball: the example removes the approaching normal velocity of particles inside or on the ball, before
     moving them, and never moves positions (particles may sink by about one step's travel); ours pushes a
-    particle that ended inside back to the surface (seed 002) and removes its approaching normal velocity.
+    particle that ended inside back to the surface (Zhang et al. 2017) and removes its approaching normal velocity.
   - the example has no pins, no wind and no checks; its start has a random offset of up to 5 cm in x and z
     (ti.random), which we replace by a deterministic start (`start_positions`).
 """

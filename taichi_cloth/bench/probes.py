@@ -25,7 +25,7 @@ def probe_scene(integrator: str, mass_ratio: float = 1.0, n: int = 6, air_dampin
                 dt: float | str = 1e-3):
     """The stability probe: a 0.3 m square sheet of n x n particles (xy plane, material density 0.2 kg/m^2,
     stretch 1, shear 0.3, bend 0.01 N/m, spring damping ratio `beta` [s]), no gravity, two top corners pinned,
-    and a checkerboard of light and heavy particles: neighbours differ by `mass_ratio` (ALGORITHMS.md 5). The
+    and a checkerboard of light and heavy particles: neighbours differ by `mass_ratio` (docs/algorithms.md). The
     step guard is off (the caller decides what the guard would say: `Scene._check_step`). Scale the stiffness
     with `probe_run` or Model.set_stiffness; the implicit integrator gets cg_max_iterations = 50 unless
     `integrator_options` say otherwise."""

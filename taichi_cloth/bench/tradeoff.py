@@ -48,7 +48,7 @@ import numpy as np
 
 from .accuracy import Trajectory, compare, pareto_front, run_sampled, sample_errors
 
-#: integrator variants: label -> (integrator, options). The approx-implicit variants are ALGORITHMS.md 1.1b's.
+#: integrator variants: label -> (integrator, options). The approx-implicit variants are docs/algorithms.md, approximate implicit variants's.
 VARIANTS: dict[str, tuple[str, dict]] = {
     "explicit": ("explicit", {}),
     "verlet": ("verlet", {}),

@@ -1,4 +1,4 @@
-"""Body morphing to measured girths (seed 002, sections 1 and 3.1): blend shapes of a base body, girths measured
+"""Body morphing to measured girths (Zhang et al. 2017, sections 1 and 3.1): blend shapes of a base body, girths measured
 like a tape on plane sections, and a fit of the blend-shape weights to target girths. Numpy and scipy; metres.
 
     from taichi_cloth.body import fit_body

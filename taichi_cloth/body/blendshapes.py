@@ -1,4 +1,4 @@
-"""Blend shapes: a base body and named channels that grow or shrink one part of it (seed 002, section 1).
+"""Blend shapes: a base body and named channels that grow or shrink one part of it (Zhang et al. 2017, section 1).
 
 A channel has a larger and a smaller limit shape of the base (same vertices, same triangles), stored sparsely
 as the vertices that move and how far:
@@ -6,7 +6,7 @@ as the vertices that move and how far:
     Shape.index (K,) int64 sorted unique vertex ids, Shape.delta (K,3) float64 [m] = limit - base on them,
     Shape.position (K,3) float64 [m] = the limit's own coordinates of those vertices.
 
-A weight w in [-1, 1] per channel picks the morph (seed 002 eq. 1, m = sum_k w_k b_k with every limit's weight
+A weight w in [-1, 1] per channel picks the morph (Zhang et al. 2017 eq. 1, m = sum_k w_k b_k with every limit's weight
 in [0, 1]): w > 0 moves toward the larger limit by w, w < 0 toward the smaller one by |w|:
 
     v = base.copy();  v[index] += |w| * delta   (of the larger shape if w > 0, the smaller if w < 0)
@@ -15,7 +15,7 @@ Channels add up. A vertex whose total displacement is exactly one limit's delta 
 stored position, so a limit mesh is reproduced bit for bit (in floating point base + (limit - base) may differ
 from limit in the last bit).
 
-Overlaps. The seed keeps channels disjoint (no vertex moved by two channels), so one channel's weight changes
+Overlaps. Zhang et al. 2017 keep channels disjoint (no vertex moved by two channels), so one channel's weight changes
 one girth only. The MakeHuman measurement targets shipped with the mannequin do overlap at their borders (on
 the shipped body: chest/underbust 917 vertices, underbust/waist 671, chest/waist 495, hips/thigh 312,
 waist/hips 260, ...; `BlendShapes.overlaps()`): there the displacements add, and growing the waist moves the
@@ -237,7 +237,7 @@ class BlendShapes:
 
     def overlaps(self) -> dict:
         """{(a, b): n} for channel pairs (in channel order) whose vertex sets (either limit) share n > 0
-        vertices. The seed assumes none; where there are some, displacements add (module docstring)."""
+        vertices. The paper assumes none; where there are some, displacements add (module docstring)."""
         names = list(self.channels)
         sets = {n: self.channels[n].vertices() for n in names}
         out = {}

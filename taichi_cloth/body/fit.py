@@ -1,7 +1,7 @@
-"""Fit a body to measured girths: the blend-shape weights at which each named girth equals its target (seed 002,
+"""Fit a body to measured girths: the blend-shape weights at which each named girth equals its target (Zhang et al. 2017,
 section 3.1.2).
 
-The seed steps one channel's weight from 0 by a fixed increment until the girth is within a preset error of
+Zhang et al. 2017 step one channel's weight from 0 by a fixed increment until the girth is within a preset error of
 the user's value. Here each girth is a function of its own channel's weight, g(w) on [-1, 1] (monotone on the
 mannequin), and scipy.optimize.brentq finds the root of g(w) - target in a few evaluations of the gauge (a few
 ms each). The channels of the MakeHuman targets overlap (BlendShapes.overlaps) and are not local: on the

@@ -1,6 +1,6 @@
-"""Girths of a body, measured like a tape (seed 002, section 3.1.2), on any morph of one base body.
+"""Girths of a body, measured like a tape (Zhang et al. 2017, section 3.1.2), on any morph of one base body.
 
-The seed cuts the body at a feature (the waist), fits cubic splines through the section's points (two natural
+Zhang et al. 2017 cut the body at a feature (the waist), fits cubic splines through the section's points (two natural
 splines, z >= 0 and z <= 0, as functions z(x)) and sums short chords along them. Here:
 
 - `periodic_spline_length(points2d)`: the length [m] of the closed curve through ordered 2D points (n,2) [m]:

@@ -1,2 +1,2 @@
-"""Garments from 2D pattern pieces (seeds 000 section 3, 003, 004): outlines, meshing, seams, placement
+"""Garments from 2D pattern pieces (Hsiao 2006 section 3; Chen 2013; Fan et al. 1998): outlines, meshing, seams, placement
 around the mannequin, sewing, and the quality metrics of a draped garment."""

@@ -1,4 +1,4 @@
-"""DXF import and export of 2D pattern pieces (seed 003), with ezdxf.
+"""DXF import and export of 2D pattern pieces (Chen 2013), with ezdxf.
 
 Reading (`read_dxf`):
   * Pieces come from model-space LAYERS (the entities on one layer; piece name = layer name) and from BLOCKS

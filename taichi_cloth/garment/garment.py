@@ -53,7 +53,7 @@ def place_piece(uv: np.ndarray, placement, body) -> np.ndarray:
 
 @dataclass(frozen=True)
 class FixedPoint:
-    """A particle held still (seed 000's fixed points): the particle of `piece` nearest to `point` (a corner
+    """A particle held still (Hsiao 2006's fixed points): the particle of `piece` nearest to `point` (a corner
     name or index, or (u, v) [m] in the piece's plane). With `anchor`, it is held at that body anchor's surface
     point moved `offset` [m] outward; otherwise where the placement put it."""
 
@@ -65,7 +65,7 @@ class FixedPoint:
 
 @dataclass
 class GarmentSpec:
-    """Everything a garment file holds (our equivalent of the seed's .gar file). Lengths in metres.
+    """Everything a garment file holds (our equivalent of Hsiao 2006's .gar file). Lengths in metres.
 
     name; pieces: PatternPiece list; seams: Seam list; placements: piece name -> Placement (around the body)
     or FreePlacement (every piece needs one); fixed: FixedPoint list; material: preset name or Material; spacing: particle spacing on the piece

@@ -1,4 +1,4 @@
-"""Garment files (TOML): our equivalent of the seed's .gar file. One file holds the pieces, seams, fixed points,
+"""Garment files (TOML): our equivalent of Hsiao 2006's .gar file. One file holds the pieces, seams, fixed points,
 material and placement of a garment; every length is in the file's `units`.
 
     name = "skirt"

@@ -1,4 +1,4 @@
-"""Quality of a draped garment (seed 004 table 1 and section 4): per piece, the area and boundary-length errors
+"""Quality of a draped garment (Fan et al. 1998 table 1 and section 4): per piece, the area and boundary-length errors
 between the 2D pattern and its 3D form, the strain of its edges; for the garment, the seam gap, how many
 particles ended inside the body and whether the drape reached static equilibrium.
 

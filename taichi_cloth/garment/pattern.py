@@ -543,7 +543,7 @@ class PatternPiece:
 
     @classmethod
     def from_bspline(cls, name: str, control_points, degree: int = 3, units: str = "m") -> "PatternPiece":
-        """Piece whose whole outline is ONE closed periodic uniform B-spline (seed 000) through the control
+        """Piece whose whole outline is ONE closed periodic uniform B-spline (Hsiao 2006) through the control
         polygon control_points (m, 2) in `units` (not repeated at the end): a single "bspline" segment with
         the first `degree` control points wrapped to the end and an unclamped uniform knot vector, so
         start == end and the curve is C^(degree-1) everywhere, the seam included. One corner, "c0"."""

@@ -1,4 +1,4 @@
-"""Placing 2D pattern pieces around the mannequin before sewing (seeds 003/004: pieces positioned around the
+"""Placing 2D pattern pieces around the mannequin before sewing (Chen 2013; Fan et al. 1998: pieces positioned around the
 body, front/back/sleeves, bent around it so that sewing starts close). Numpy only.
 
 The body

@@ -1,16 +1,16 @@
-"""Seams (seed 003): a seam joins a stretch of one piece's outline to a stretch of another's (or of the same
+"""Seams (Chen 2013): a seam joins a stretch of one piece's outline to a stretch of another's (or of the same
 piece, e.g. a sleeve's underarm).
 
 A side of a seam is picked as two corners of a piece, `start` then `end`. The stretch between them is the
 shorter way round the outline (in segments; a tie is ambiguous and refused). Its boundary points are stored in
 the outline's loop order together with a direction flag that records whether the pick ran with the loop or
-against it (seed 003's flag); when the two flags differ, side B's list is reversed, so point i of A meets
+against it (Chen 2013's flag); when the two flags differ, side B's list is reversed, so point i of A meets
 point i of B and the pick "from the hem up to the armpit" on both pieces never sews crosswise.
 
 Both sides are resampled to the same number of points: `plan_counts` gives every segment of a seam side its
 share of one interval count N = round(max(length A, length B) / spacing), in proportion to its length, so the
 two sides have N + 1 points each and pair by arc length. Sides whose lengths differ by more than the seam's
-tolerance (seed 003: a seam that cannot pair) are an error that names the seam.
+tolerance (Chen 2013: a seam that cannot pair) are an error that names the seam.
 """
 from __future__ import annotations
 
@@ -140,7 +140,7 @@ def side_vertices(boundary_segments: list, r: SideRoute) -> np.ndarray:
 
 def pair_sides(a_loop: np.ndarray, ra: SideRoute, b_loop: np.ndarray, rb: SideRoute, seam_name: str = "") -> np.ndarray:
     """(N+1, 2) pairs (vertex of A, vertex of B): both sides stored in loop order with their pick flags; B is
-    reversed when the flags differ (seed 003), so point i of A's pick meets point i of B's pick."""
+    reversed when the flags differ (Chen 2013), so point i of A's pick meets point i of B's pick."""
     if len(a_loop) != len(b_loop):
         raise PatternError(f"seam {seam_name!r}: the sides have {len(a_loop)} and {len(b_loop)} points")
     b = b_loop if ra.forward == rb.forward else b_loop[::-1]

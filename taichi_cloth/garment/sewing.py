@@ -1,4 +1,4 @@
-"""Sewing (seeds 003 and 004; ALGORITHMS.md 4.2): seam springs pull the partners of every seam pair together,
+"""Sewing (Chen 2013; Fan et al. 1998; docs/algorithms.md, sewing): seam springs pull the partners of every seam pair together,
 then the pairs are joined and the drape goes on.
 
 A seam spring is a zero-rest-length spring F = k_s (x_b - x_a). Started at full strength across a gap of tens
@@ -14,7 +14,7 @@ Sewing stops when every pair is closer than `epsilon` and the elastic energy cha
 `energy_tolerance` over the last frame, relative to the energy itself or, when that is smaller, to the energy of
 one seam pair held at the closing gap (below that a change is round-off: two flat squares sewn in zero gravity
 end with 1e-11 J whose frame-to-frame noise is tens of per cent). Then the pairs are joined: merged into one
-particle each (default; seed 003's alternative, a very stiff short spring, is join = "spring"), the seam edges
+particle each (default; Chen 2013's alternative, a very stiff short spring, is join = "spring"), the seam edges
 get bend springs across them, gravity comes back on if it was off while sewing, and the drape continues.
 """
 

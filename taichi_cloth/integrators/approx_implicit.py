@@ -1,4 +1,4 @@
-"""The approximate implicit step of seed 000 eq. (2) (Kang, Choi, Cho, Lee 2001).
+"""The approximate implicit step of Hsiao 2006 eq. (2) (Kang, Choi, Cho, Lee 2001).
 
 Linearised backward Euler (M - h^2 J) dv = h f with the spring Jacobian replaced by the isotropic
 "linear spring" matrix J~ (J~_ii = -sum_j k_ij I, J~_ij = k_ij I), solved by Jacobi sweeps:
@@ -7,20 +7,20 @@ Linearised backward Euler (M - h^2 J) dv = h f with the spring Jacobian replaced
 
 Seed form (the default, exactly as published): two sweeps from dv = 0 and no h J~ v term, i.e.
     dv~_j = h f_j / (m_j + h^2 k n_j),  dv_i = (h f_i + h^2 k sum_j dv~_j) / (m_i + h^2 k n_i),
-with per-spring k_ij in place of the single k (ALGORITHMS.md 1.1). Then v += dv, x += h v.
+with per-spring k_ij in place of the single k (docs/algorithms.md, approximate implicit step). Then v += dv, x += h v.
 
 Its known weakness: it damps low-frequency motion. A uniform fall gets dv = h g (1 - r^2),
 r = h^2 K / (m + h^2 K), so a stiff free-falling sheet falls at a fraction of g; statics stay right
-(dv = 0 iff f = 0). Variants (ALGORITHMS.md 1.1b), as options:
+(dv = 0 iff f = 0). Variants (docs/algorithms.md, approximate implicit variants), as options:
   warm_start: start the sweeps from the previous step's dv (a uniform fall then converges to dv = h g,
               at the rate r^2 per step). Measured: it is linearly UNSTABLE on spring modes (modal analysis of
               the two-sweep map: spectral radius 1.08 at r = 0.5, 1.22 at r = 0.9) and blew up on every hanging
               cloth we tried, with or without jv_term; offered to study the free-fall bias, not for drapes;
   jv_term:    add h^2 sum_j k_ij (v_j - v_i) (the h J~ v term) to the right-hand side, which is what
               makes more than two sweeps safe (without it, more sweeps blew up in our tests);
-  sweeps:     the number of Jacobi sweeps (the seed uses 2);
+  sweeps:     the number of Jacobi sweeps (Hsiao 2006 uses 2);
   multigrid_cycles: on a multilevel (4-8) cloth, solve the system by that many iterations of CG
-              preconditioned with a V-cycle over the levels (multilevel.multigrid: the seed's Jacobi sweeps
+              preconditioned with a V-cycle over the levels (multilevel.multigrid: the paper's Jacobi sweeps
               as the smoother, the hierarchy's prolongation and its transpose between levels) instead of the
               sweeps. Implies jv_term. The coarse levels carry the low-frequency motion the sweeps cannot.
 Pinned particles have dv = 0 in the solve; a particle in contact with a collider in the last step has the
@@ -58,7 +58,7 @@ class ApproxImplicit(Integrator):
         if self.options["multigrid_cycles"] > 0:
             if options.get("jv_term") is False:
                 raise ValueError("approx-implicit multigrid_cycles needs jv_term = true (a converged solve without "
-                                 "the h J~ v term is unstable, ALGORITHMS.md 1.1)")
+                                 "the h J~ v term is unstable, docs/algorithms.md, approximate implicit step)")
             self.options["jv_term"] = True
         if self.options["warm_start"]:
             warn("approx-implicit warm_start is linearly unstable on spring modes (spectral radius up to ~1.2 per "
@@ -148,7 +148,7 @@ class ApproxImplicit(Integrator):
                 s.v[i] += self.contact_filter(i, self.dv_solved[i])
                 s.x[i] += h * s.v[i]
 
-    # ------------------------------------------------------------------ the seed's Jacobi sweeps
+    # ------------------------------------------------------------------ the paper's Jacobi sweeps
     @ti.kernel
     def _sweeps(self, dt: ti.f64):
         m, s = self.model, self.state

@@ -31,7 +31,7 @@ class Integrator:
 
     An explicit integrator also implements `is_stable(h, omega, gamma, beta)`: the closed-form linear
     stability condition for a mode of frequency omega [rad/s] with air drag rate gamma [1/s] and
-    stiffness-proportional spring damping beta [s] (ALGORITHMS.md 1.4).
+    stiffness-proportional spring damping beta [s] (docs/algorithms.md, step limits).
     """
 
     name: ClassVar[str] = ""

@@ -1,11 +1,11 @@
-"""Explicit central differences with viscous damping, seed 004 eq. (14):
+"""Explicit central differences with viscous damping, Fan et al. 1998 eq. (14):
 
     (m/h^2 + g/(2h)) X(t+h) = f(X_t) + (2m/h^2) X_t - (m/h^2 - g/(2h)) X(t-h)
 
 with the viscous coefficient g = gamma * m (gamma = air drag rate [1/s]) and the forces f lagged at t.
 In displacement form (d = X_t - X(t-h), as Verlet, for float32 precision at small steps):
     d+ = (h^2 f/m + (1 - gh/2m) d) / (1 + gh/2m),  X(t+h) = X_t + d+.
-Start-up as Verlet (X(-h) from a Taylor step; the seed's X(-h) = X(0) is its v0 = 0, h -> 0 limit).
+Start-up as Verlet (X(-h) from a Taylor step; the paper's X(-h) = X(0) is its v0 = 0, h -> 0 limit).
 """
 import taichi as ti
 

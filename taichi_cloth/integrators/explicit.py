@@ -1,4 +1,4 @@
-"""Symplectic (semi-implicit) Euler, seed 003: v += h F/m ; x += h v."""
+"""Symplectic (semi-implicit) Euler, Chen 2013: v += h F/m ; x += h v."""
 
 import taichi as ti
 

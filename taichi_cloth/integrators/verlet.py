@@ -1,7 +1,7 @@
-"""Position Verlet with the damping of seed 002:  x+ = (2 - c) x - (1 - c) x- + a h^2.
+"""Position Verlet with the damping of Zhang et al. 2017:  x+ = (2 - c) x - (1 - c) x- + a h^2.
 
 c is the per-step damping factor; we set c = 1 - exp(-gamma h) from the air drag rate gamma [1/s]
-so the drag does not depend on the step (ALGORITHMS.md 1.4).
+so the drag does not depend on the step (docs/algorithms.md, step limits).
 
 Implemented in displacement form: with d = x - x- (= h v), the update is d+ = (1 - c) d + a h^2,
 x+ = x + d+, which is the same recursion but keeps float32 precision when h is small (the position
@@ -66,12 +66,12 @@ class Verlet(HistoryIntegrator):
 
     @ti.func
     def displacement(self, d, a, h, c):
-        """x+ - x from d = x - x-: seed 002, (1 - c) d + a h^2."""
+        """x+ - x from d = x - x-: Zhang et al. 2017, (1 - c) d + a h^2."""
         return (1.0 - c) * d + a * h * h
 
     @classmethod
     def is_stable(cls, h, omega, gamma, beta):
         # modal recursion x+ = (2 - a - h^2 w^2) x - (1 - a) x-, a = c + h beta w^2 (lagged spring damping):
-        # stable iff h^2 w^2 < 4 - 2a (ALGORITHMS.md 1.4 with c_d -> a)
+        # stable iff h^2 w^2 < 4 - 2a (docs/algorithms.md, step limits with c_d -> a)
         a = 1.0 - math.exp(-gamma * h) + h * beta * omega * omega
         return h * h * omega * omega < 4.0 - 2.0 * a
