@@ -15,7 +15,7 @@ def main(argv=None) -> int:
     scene = loaded.scene
     with tc.Recorder(args.out / "cloth_in_wind.rrd", recording_name="cloth_in_wind") as rec:  # kept if the run blows up
         summary = scene.run(loaded.frames, recorder=rec, progress=not args.no_progress)
-    summary.outputs += [str(scene.export_mesh(rec.path.with_suffix(suffix))) for suffix in (".obj", ".ply")]
+    summary.outputs += [str(rec.path)] + [str(scene.export_mesh(rec.path.with_suffix(s))) for s in (".obj", ".ply")]
     print(summary.format())
     print(opened_with(rec.path))
     return 0

@@ -17,7 +17,7 @@ def main(argv=None) -> int:
     scene = loaded.scene
     with tc.Recorder(args.out / "multilevel_drape.rrd", recording_name="multilevel_drape") as rec:  # kept if the run blows up
         summary = scene.run(loaded.frames, recorder=rec, progress=not args.no_progress)
-    summary.outputs += [str(scene.export_mesh(rec.path.with_suffix(suffix))) for suffix in (".obj", ".ply")]
+    summary.outputs += [str(rec.path)] + [str(scene.export_mesh(rec.path.with_suffix(s))) for s in (".obj", ".ply")]
     print(summary.format())
     print(opened_with(rec.path))
     return 0

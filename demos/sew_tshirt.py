@@ -21,7 +21,7 @@ def main(argv=None) -> int:
     scene = loaded.scene
     with tc.Recorder(args.out / "sew_tshirt.rrd", recording_name="sew_tshirt") as rec:  # kept if the run blows up
         summary = scene.run(loaded.frames, recorder=rec, progress=not args.no_progress)
-    summary.outputs += [str(scene.export_mesh(rec.path.with_suffix(suffix))) for suffix in (".obj", ".ply")]
+    summary.outputs += [str(rec.path)] + [str(scene.export_mesh(rec.path.with_suffix(s))) for s in (".obj", ".ply")]
     print(summary.format())
     print(garment_quality(scene).format())  # per piece: area, boundary and strain; seam gap, penetrations
     print(opened_with(rec.path))
