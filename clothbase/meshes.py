@@ -73,6 +73,16 @@ def interior_edge_opposites(triangles: np.ndarray) -> np.ndarray:
     return np.unique(pairs, axis=0)
 
 
+def rows_in(rows: np.ndarray, table: np.ndarray) -> np.ndarray:
+    """(n,) bool: which rows of the non-negative index pairs `rows` (n, 2) occur in `table` (m, 2) (e.g. which
+    springs are edges of a list)."""
+    rows, table = np.asarray(rows, dtype=np.int64).reshape(-1, 2), np.asarray(table, dtype=np.int64).reshape(-1, 2)
+    if len(table) == 0 or len(rows) == 0:
+        return np.zeros(len(rows), dtype=bool)
+    base = int(max(rows.max(), table.max())) + 1
+    return np.isin(rows[:, 0] * base + rows[:, 1], table[:, 0] * base + table[:, 1])
+
+
 def edge_face_counts(triangles: np.ndarray) -> np.ndarray:
     """How many triangles share each undirected edge; shape (E,)."""
     return edges_of(triangles)[2]

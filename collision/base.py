@@ -1,5 +1,6 @@
 """What every collider shares: binding to the cloth's fields, start-of-step positions, the velocity response."""
 import taichi as ti
+
 from clothbase.fields import FieldBlock
 
 

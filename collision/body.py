@@ -16,11 +16,12 @@ testing every candidate would have cost.
 import numpy as np
 import taichi as ti
 
-from .geometry import closest_point_on_triangle, collision_possibility, inside_triangle, segment_triangle, solid_angle
-from .base import ParticleCollider
-from .grid import VoxelGrid
-from clothbase.meshes import validate_triangle_mesh
 from clothbase.fields import FieldBlock
+from clothbase.meshes import validate_triangle_mesh
+
+from .base import ParticleCollider
+from .geometry import closest_point_on_triangle, collision_possibility, inside_triangle, segment_triangle, solid_angle
+from .grid import VoxelGrid
 
 MODES = ("fuzzy", "exact")
 _CANDIDATES, _TESTS, _HITS, _CONTACTS, _OVERFLOW, _QUERIES = range(6)

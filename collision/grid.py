@@ -12,6 +12,7 @@ import math
 
 import numpy as np
 import taichi as ti
+
 from clothbase.fields import FieldBlock
 
 

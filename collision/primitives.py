@@ -10,8 +10,9 @@ normal velocity removed, Coulomb friction on the rest).
 import numpy as np
 import taichi as ti
 
-from .base import ParticleCollider
 from clothbase.fields import FieldBlock
+
+from .base import ParticleCollider
 
 
 @ti.func

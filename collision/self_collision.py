@@ -12,10 +12,11 @@ particle moves (one-sided): simple and stable, not momentum-exact; a scene turns
 import numpy as np
 import taichi as ti
 
+from clothbase.fields import FieldBlock
+
 from .base import ParticleCollider
 from .geometry import inside_triangle
 from .grid import VoxelGrid
-from clothbase.fields import FieldBlock
 
 
 @ti.data_oriented

@@ -1,6 +1,7 @@
 """A silk flag on a pole in a gusting wind, with Provot stretch limiting (demos/scenes/cloth_in_wind.toml).
 
-    python demos/cloth_in_wind.py [--out DIR] [--frames N] [--integrator NAME] [--dt H|auto] [--quality Q] [--arch cpu|gpu]
+    python demos/cloth_in_wind.py [--out DIR] [--frames N] [--integrator NAME] [--dt H|auto] [--quality Q]
+           [--arch cpu|gpu]
 
 Writes DIR/cloth_in_wind.rrd (open it with `rerun DIR/cloth_in_wind.rrd`) and the final mesh.
 """
@@ -13,7 +14,8 @@ def main(argv=None) -> int:
     tc.init(args.arch)
     loaded = load(SCENES / "cloth_in_wind.toml", args)
     scene = loaded.scene
-    with tc.Recorder(args.out / "cloth_in_wind.rrd", recording_name="cloth_in_wind") as rec:  # kept if the run blows up
+    # the recording is closed, and kept, also when the run blows up
+    with tc.Recorder(args.out / "cloth_in_wind.rrd", recording_name="cloth_in_wind") as rec:
         summary = scene.run(loaded.frames, recorder=rec, progress=not args.no_progress)
     summary.outputs += [str(rec.path)] + [str(scene.export_mesh(rec.path.with_suffix(s))) for s in (".obj", ".ply")]
     print(summary.format())

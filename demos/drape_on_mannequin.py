@@ -1,6 +1,7 @@
 """A silk sheet dropped over the shipped CC0 mannequin (demos/scenes/drape_on_mannequin.toml).
 
-    python demos/drape_on_mannequin.py [--out DIR] [--frames N] [--integrator NAME] [--dt H|auto] [--quality Q] [--arch cpu|gpu]
+    python demos/drape_on_mannequin.py [--out DIR] [--frames N] [--integrator NAME] [--dt H|auto] [--quality Q]
+           [--arch cpu|gpu]
 
 Writes DIR/drape_on_mannequin.rrd (the body logged once) and the final mesh, and prints the collision
 counters: triangle tests done by the fuzzy ranking against the candidates in the touched voxels.
@@ -14,7 +15,8 @@ def main(argv=None) -> int:
     tc.init(args.arch)
     loaded = load(SCENES / "drape_on_mannequin.toml", args)
     scene = loaded.scene
-    with tc.Recorder(args.out / "drape_on_mannequin.rrd", recording_name="drape_on_mannequin") as rec:  # kept if the run blows up
+    # the recording is closed, and kept, also when the run blows up
+    with tc.Recorder(args.out / "drape_on_mannequin.rrd", recording_name="drape_on_mannequin") as rec:
         summary = scene.run(loaded.frames, recorder=rec, progress=not args.no_progress)
     summary.outputs += [str(rec.path)] + [str(scene.export_mesh(rec.path.with_suffix(s))) for s in (".obj", ".ply")]
     print(summary.format())

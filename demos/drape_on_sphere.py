@@ -1,6 +1,7 @@
 """A cotton square dropped onto a ball on the floor (demos/scenes/drape_on_sphere.toml).
 
-    python demos/drape_on_sphere.py [--out DIR] [--frames N] [--integrator NAME] [--dt H|auto] [--quality Q] [--arch cpu|gpu]
+    python demos/drape_on_sphere.py [--out DIR] [--frames N] [--integrator NAME] [--dt H|auto] [--quality Q]
+           [--arch cpu|gpu]
 
 Writes DIR/drape_on_sphere.rrd (the ball and floor logged once) and the final mesh.
 """
@@ -13,7 +14,8 @@ def main(argv=None) -> int:
     tc.init(args.arch)
     loaded = load(SCENES / "drape_on_sphere.toml", args)
     scene = loaded.scene
-    with tc.Recorder(args.out / "drape_on_sphere.rrd", recording_name="drape_on_sphere") as rec:  # kept if the run blows up
+    # the recording is closed, and kept, also when the run blows up
+    with tc.Recorder(args.out / "drape_on_sphere.rrd", recording_name="drape_on_sphere") as rec:
         summary = scene.run(loaded.frames, recorder=rec, progress=not args.no_progress)
     summary.outputs += [str(rec.path)] + [str(scene.export_mesh(rec.path.with_suffix(s))) for s in (".obj", ".ply")]
     print(summary.format())

@@ -34,7 +34,8 @@ def main(argv=None) -> int:
         quality = garment_quality(scene).pieces
         pieces = draped_pieces(scene)
         for name, vertices, triangles, _ in pieces:  # each draped piece as a mesh: `taichi_cloth flatten` reads these
-            meshio.write(rec.path.with_name(f"{rec.path.stem}_{name}.obj"), meshio.Mesh(vertices, [("triangle", triangles)]))
+            path = rec.path.with_name(f"{rec.path.stem}_{name}.obj")
+            meshio.write(path, meshio.Mesh(vertices, [("triangle", triangles)]))
         started = time.perf_counter()
         flat = flatten_pieces(pieces)
         wall = time.perf_counter() - started

@@ -1,6 +1,7 @@
 """The first demo: a cotton sheet hanging from its two top corners (demos/scenes/hanging_cloth.toml).
 
-    python demos/hanging_cloth.py [--out DIR] [--frames N] [--integrator NAME] [--dt H|auto] [--quality Q] [--arch cpu|gpu]
+    python demos/hanging_cloth.py [--out DIR] [--frames N] [--integrator NAME] [--dt H|auto] [--quality Q]
+           [--arch cpu|gpu]
 
 Writes DIR/hanging_cloth.rrd (open it with `rerun DIR/hanging_cloth.rrd`) and the final mesh as .obj/.ply.
 """
@@ -13,7 +14,8 @@ def main(argv=None) -> int:
     tc.init(args.arch)
     loaded = load(SCENES / "hanging_cloth.toml", args)
     scene = loaded.scene
-    with tc.Recorder(args.out / "hanging_cloth.rrd", recording_name="hanging_cloth") as rec:  # kept if the run blows up
+    # the recording is closed, and kept, also when the run blows up
+    with tc.Recorder(args.out / "hanging_cloth.rrd", recording_name="hanging_cloth") as rec:
         summary = scene.run(loaded.frames, recorder=rec, progress=not args.no_progress)
     summary.outputs += [str(rec.path)] + [str(scene.export_mesh(rec.path.with_suffix(s))) for s in (".obj", ".ply")]
     print(summary.format())

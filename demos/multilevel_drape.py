@@ -1,7 +1,8 @@
 """A cotton square dropped onto a ball, simulated on a coarse 4-8 level first and refined level by level
 (1 to 5) as the drape settles (demos/scenes/multilevel_drape.toml; Hsiao 2006 section 2.2).
 
-    python demos/multilevel_drape.py [--out DIR] [--frames N] [--integrator NAME] [--dt H|auto] [--quality Q] [--arch cpu|gpu]
+    python demos/multilevel_drape.py [--out DIR] [--frames N] [--integrator NAME] [--dt H|auto] [--quality Q]
+           [--arch cpu|gpu]
 
 Writes DIR/multilevel_drape.rrd: the mesh topology changes at each level switch (an event marks it) and
 metrics/cloth/level plots the level over time. Open it with `rerun DIR/multilevel_drape.rrd`.
@@ -15,7 +16,8 @@ def main(argv=None) -> int:
     tc.init(args.arch)
     loaded = load(SCENES / "multilevel_drape.toml", args)
     scene = loaded.scene
-    with tc.Recorder(args.out / "multilevel_drape.rrd", recording_name="multilevel_drape") as rec:  # kept if the run blows up
+    # the recording is closed, and kept, also when the run blows up
+    with tc.Recorder(args.out / "multilevel_drape.rrd", recording_name="multilevel_drape") as rec:
         summary = scene.run(loaded.frames, recorder=rec, progress=not args.no_progress)
     summary.outputs += [str(rec.path)] + [str(scene.export_mesh(rec.path.with_suffix(s))) for s in (".obj", ".ply")]
     print(summary.format())

@@ -1,7 +1,8 @@
 """Sew the two-panel skirt onto the mannequin (demos/scenes/sew_skirt.toml, garment demos/garments/skirt.toml)
 and drape it; prints the run summary and the quality table, writes DIR/sew_skirt.rrd.
 
-    python demos/sew_skirt.py [--out DIR] [--frames N] [--integrator NAME] [--dt H|auto] [--quality Q] [--arch cpu|gpu]
+    python demos/sew_skirt.py [--out DIR] [--frames N] [--integrator NAME] [--dt H|auto] [--quality Q]
+           [--arch cpu|gpu]
 """
 import taichi_cloth as tc
 from _common import SCENES, arguments, ends, load, opened_with
@@ -13,7 +14,8 @@ def main(argv=None) -> int:
     tc.init(args.arch)
     loaded = load(SCENES / "sew_skirt.toml", args)
     scene = loaded.scene
-    with tc.Recorder(args.out / "sew_skirt.rrd", recording_name="sew_skirt") as rec:  # kept if the run blows up
+    # the recording is closed, and kept, also when the run blows up
+    with tc.Recorder(args.out / "sew_skirt.rrd", recording_name="sew_skirt") as rec:
         summary = scene.run(loaded.frames, recorder=rec, progress=not args.no_progress)
     summary.outputs += [str(rec.path)] + [str(scene.export_mesh(rec.path.with_suffix(s))) for s in (".obj", ".ply")]
     print(summary.format())

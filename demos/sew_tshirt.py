@@ -2,7 +2,8 @@
 back and two sleeves are placed around the body, pulled together along ten seams with gravity off, merged when
 every seam pair is closer than 2 mm and the elastic energy has settled, then draped under gravity.
 
-    python demos/sew_tshirt.py [--out DIR] [--frames N] [--integrator NAME] [--dt H|auto] [--quality Q] [--arch cpu|gpu]
+    python demos/sew_tshirt.py [--out DIR] [--frames N] [--integrator NAME] [--dt H|auto] [--quality Q]
+           [--arch cpu|gpu]
 
 Writes DIR/sew_tshirt.rrd (the strain map as vertex colours, the seam gap under metrics/, an event when the
 seams merge) and the final mesh as .obj/.ply; prints the run summary and the quality table (per piece: area and
@@ -19,7 +20,8 @@ def main(argv=None) -> int:
     tc.init(args.arch)
     loaded = load(SCENES / "sew_tshirt.toml", args)
     scene = loaded.scene
-    with tc.Recorder(args.out / "sew_tshirt.rrd", recording_name="sew_tshirt") as rec:  # kept if the run blows up
+    # the recording is closed, and kept, also when the run blows up
+    with tc.Recorder(args.out / "sew_tshirt.rrd", recording_name="sew_tshirt") as rec:
         summary = scene.run(loaded.frames, recorder=rec, progress=not args.no_progress)
     summary.outputs += [str(rec.path)] + [str(scene.export_mesh(rec.path.with_suffix(s))) for s in (".obj", ".ply")]
     print(summary.format())

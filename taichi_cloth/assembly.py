@@ -55,8 +55,8 @@ def assemble(cloth, *, name: str = "cloth", integrator: str = DEFAULT_INTEGRATOR
     """The parts of a scene (Scene(cloth, **options) calls this). Units are SI.
 
     cloth:              ClothData, a Model, a MultilevelCloth (ClothBuilder.multilevel_grid) or a GarmentCloth
-    integrator:         "explicit" | "verlet" | "central-difference" | "approx-implicit" | "implicit" (default: implicit,
-                        unconditionally stable and accurate; see docs/integrators.md)
+    integrator:         "explicit" | "verlet" | "central-difference" | "approx-implicit" | "implicit" (default:
+                        implicit, without a step limit and accurate; see docs/integrators.md)
     dt:                 time step [s], or "auto": chosen before every frame from the integrator's stable step
                         (taichi_cloth.adaptive; one step per frame for the implicit integrators)
     adaptive:           with dt = "auto": AdaptiveOptions keyword arguments (safety, dt_min, dt_max, growth,

@@ -10,7 +10,8 @@ import numpy as np
 from clothbase.meshes import load_triangle_mesh
 
 from .cloth import PLANES, ClothData, SpringKind, mesh_cloth, spring_arrays
-from .material import Material, material as as_material
+from .material import Material
+from .material import material as as_material
 from .multilevel_cloth import MultilevelCloth, multilevel_grid
 
 

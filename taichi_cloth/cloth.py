@@ -14,7 +14,8 @@ import numpy as np
 
 from clothbase.meshes import edges_of, interior_edge_opposites, triangle_areas, validate_triangle_mesh
 
-from .material import Material, material as as_material
+from .material import Material
+from .material import material as as_material
 
 #: plane name -> the coordinate axes (u, v) of a flat cloth laid in it ("xy": hanging, "xz": horizontal)
 PLANES = {"xy": (0, 1), "xz": (0, 2), "yz": (1, 2), "zy": (2, 1)}

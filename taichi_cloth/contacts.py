@@ -8,6 +8,7 @@ back, and the cloth stretches around every contact (we measured 30-260 % strain 
 h = 1/120 s; with the filter it stays at a few per cent). Built only when a scene has colliders.
 """
 import taichi as ti
+
 from clothbase.fields import FieldBlock
 
 

@@ -4,8 +4,9 @@ from dataclasses import dataclass
 
 import taichi as ti
 
-from .cloth import SpringKind
 from clothbase.fields import FieldBlock
+
+from .cloth import SpringKind
 
 _KINETIC, _ELASTIC, _GRAVITY, _MAX_STRAIN, _MAX_SPEED, _NONFINITE = range(6)
 

@@ -19,10 +19,11 @@ class BodyError(TaichiClothError, ValueError):
 
 
 # A mesh is unusable (missing, empty, non-manifold, NaN vertices, degenerate faces): the message names the file.
-# Defined by the collision package (which loads bodies and cloth meshes and must not import taichi_cloth).
-from clothbase.errors import EngineWarning, MeshError, warn  # noqa: E402
+# EngineWarning: what a user should know, printed once as one line. Both are defined in the base layer (clothbase),
+# which every package imports, so that collision and multilevel raise and warn alike without importing taichi_cloth.
+from clothbase.errors import EngineWarning, MeshError  # noqa: E402
 
-__all__ = ["BlowUpError", "BodyError", "MeshError", "PatternError", "SceneError", "TaichiClothError"]
+__all__ = ["BlowUpError", "BodyError", "EngineWarning", "MeshError", "PatternError", "SceneError", "TaichiClothError"]
 
 
 class BlowUpError(TaichiClothError, RuntimeError):

@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from clothbase.meshes import connected_components, edges_of, triangle_areas, validate_triangle_mesh
+
 from .errors import MeshError
 
 __all__ = ["FlatPiece", "disc_boundary", "unfold", "flatten", "flatten_pieces", "write_flat_dxf", "plot_flat",

@@ -10,6 +10,7 @@ drag or wind writes a field and never recompiles.
 
 import numpy as np
 import taichi as ti
+
 from clothbase.fields import FieldBlock
 
 

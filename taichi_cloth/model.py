@@ -9,9 +9,10 @@ from __future__ import annotations
 import numpy as np
 import taichi as ti
 
+from clothbase.fields import FieldBlock
+
 from .cloth import ClothData
 from .runtime import ensure_initialized
-from clothbase.fields import FieldBlock
 
 _PRECISIONS = {"f32": ti.f32, "f64": ti.f64}
 

@@ -13,10 +13,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from clothbase.meshes import rows_in
 from multilevel.hierarchy import signed_areas
 
 from .cloth import ClothData, SpringKind, in_plane, mesh_cloth
-from .material import Material, material as as_material
+from .material import Material
+from .material import material as as_material
 
 
 @dataclass
@@ -65,17 +67,9 @@ def level_cloth(level, material: str | Material, center=(0.0, 0.0, 0.0), plane: 
     hyp = np.sort(tri[:, :2], axis=1)
     pairs = np.sort(data.springs, axis=1)
     structural = data.kind == SpringKind.STRUCTURAL
-    is_hyp = _rows_in(pairs, hyp) & structural
+    is_hyp = rows_in(pairs, hyp) & structural
     data.kind[is_hyp] = SpringKind.SHEAR
     return data
-
-
-def _rows_in(rows: np.ndarray, table: np.ndarray) -> np.ndarray:
-    """(len(rows),) bool: which rows of an (n,2) int array occur in `table` (m,2)."""
-    if len(table) == 0:
-        return np.zeros(len(rows), dtype=bool)
-    base = int(max(rows.max(initial=0), table.max(initial=0))) + 1
-    return np.isin(rows[:, 0] * base + rows[:, 1], table[:, 0] * base + table[:, 1])
 
 
 def multilevel_cloth(hierarchy, material: str | Material = "cotton", center=(0.0, 0.0, 0.0), plane: str = "xy",

@@ -1,6 +1,7 @@
 """Vertex normals of the cloth surface, computed in a Taichi kernel (used by wind and the recorder)."""
 import numpy as np
 import taichi as ti
+
 from clothbase.fields import FieldBlock
 
 

@@ -134,8 +134,9 @@ class Refiner(Controller):
         self._steps = frame.steps
         self._energies.append(m.total)
         w = self.settle.window
-        self.settled = (len(self._energies) > w and m.max_speed < self.settle.max_speed
-                        and abs(self._energies[-1] - self._energies[-1 - w]) < self.settle.energy_change * self.energy_scale)
+        calm = len(self._energies) > w and abs(self._energies[-1] - self._energies[-1 - w]) < (
+            self.settle.energy_change * self.energy_scale)
+        self.settled = calm and m.max_speed < self.settle.max_speed
         if self.at_finest or not self.refine_enabled:
             return None
         overdue = (self.settle.max_time is not None

@@ -56,7 +56,8 @@ class Scene:
         self._notes: list[tuple[str, str]] = []  # (level, text) since they were last collected
         hooks = lambda name: [getattr(c, name) for c in self.controllers if overrides(c, name)]  # noqa: E731
         self._before_step, self._after_step = hooks("before_step"), hooks("after_step")
-        self._after_frame, self._model_changed, self._record = hooks("after_frame"), hooks("model_changed"), hooks("record")
+        self._after_frame, self._model_changed = hooks("after_frame"), hooks("model_changed")
+        self._record = hooks("record")
 
     def controller(self, name: str):
         """The controller called `name` ("pins", "colliders", "sewing", "refiner"...), or None if the scene has none."""
@@ -214,7 +215,8 @@ class Scene:
         path = Path(path)
         tri = self.model.data.triangles
         n = self.model.data.n_particles
-        cells = [("triangle", tri.astype(np.int32))] if len(tri) else [("vertex", np.arange(n, dtype=np.int32)[:, None])]
+        cells = ([("triangle", tri.astype(np.int32))] if len(tri)
+                 else [("vertex", np.arange(n, dtype=np.int32)[:, None])])
         meshio.write(path, meshio.Mesh(self.positions(), cells))
         return path
 
@@ -257,16 +259,11 @@ class Scene:
         is attached to it as `.summary`."""
         if frames < 0:
             raise ValueError("frames must be >= 0")
-        entity = entity or "cloth"
-        clock = self.clock
-        summary = RunSummary(self.name, self.integrator.name, clock.dt, clock.auto, self.model.data.n_particles,
-                             self.model.data.n_springs)
-        t_start, stats_start, counters = self.state.t, self._stats(), clock.counters()
-        if recorder is not None:
-            t0 = time.perf_counter()
-            recorder.begin_cloth(entity, self.layout(), translation)
-            recorder.log_frame(entity, self.snapshot(0, self.measure(), events=self._collect(summary)))
-            summary.wall_record += time.perf_counter() - t0
+        summary = RunSummary(self.name, self.integrator.name, self.clock.dt, self.clock.auto,
+                             self.model.data.n_particles, self.model.data.n_springs)
+        start = (self.state.t, self._stats(), self.clock.counters())
+        log = _FrameLog(recorder, entity or "cloth", record_every, frames, summary)
+        log.begin(self, translation)
         bar = _progress_bar(frames, self.name) if progress else None
         frame = 0
         try:
@@ -274,52 +271,34 @@ class Scene:
                 t0 = time.perf_counter()
                 m, n, simulated = self._frame(frame, summary)
                 elapsed = time.perf_counter() - t0
-                summary.frames, summary.steps = frame, summary.steps + n
-                if frame == 1 and frames > 1:
-                    summary.first_frame_wall = elapsed  # compiles; kept out of the speed figures
-                else:
-                    summary.wall_step += elapsed
-                    summary.timed_steps += n
-                    summary.timed_sim += simulated
-                clock.observe(m.max_speed, n)
-                info = FrameInfo(frame, self.state.t, self.steps_taken, m)
+                summary.count_frame(frame, n, elapsed, simulated, compiling=frame == 1 < frames)
+                self.clock.observe(m.max_speed, n)
                 version = self.topology_version
-                for hook in self._after_frame:
-                    change = hook(info)
+                info = FrameInfo(frame, self.state.t, self.steps_taken, m)
+                for change in (hook(info) for hook in self._after_frame):
                     if change is not None:
                         self.apply(change)
                         m = self.measure()
-                summary.final = m
-                summary.max_strain_seen = max(summary.max_strain_seen, m.max_strain)
-                events = self._collect(summary)
-                if recorder is not None and (frame % record_every == 0 or frame == frames or events
-                                             or self.topology_version != version):
-                    t0 = time.perf_counter()
-                    recorder.log_frame(entity, self.snapshot(frame, m, n / elapsed if elapsed > 0 else None, events))
-                    if frame > 1:
-                        summary.wall_record += time.perf_counter() - t0
+                summary.measured(m)
+                log.frame(self, frame, m, n / elapsed if elapsed > 0 else None, self.topology_version != version)
                 if bar is not None:
                     bar.update(1)
         except BlowUpError as err:
-            summary.frames = frame
-            summary.blowup = str(err)
-            summary.blowup_short = f"blew up by step {err.step} ({err.reason}); the error says what to change"
-            err.summary = summary
-            if recorder is not None:
-                recorder.log_events(entity, frame, self.state.t, self._collect(summary) + [("ERROR", str(err))])
+            summary.blew_up(frame, err)
+            log.blow_up(self, frame, err)
             raise
         finally:
             if bar is not None:
                 bar.close()
+            t_start, stats_start, counters = start
             summary.sim_time = self.state.t - t_start
             summary.n_particles, summary.n_springs = self.model.data.n_particles, self.model.data.n_springs
-            summary.warnings = list(dict.fromkeys(self.warnings + clock.warnings))
+            summary.warnings = list(dict.fromkeys(self.warnings + self.clock.warnings))
             if summary.steps:
                 summary.stats = {f"{k} per step": (v - stats_start.get(k, 0)) / summary.steps
                                  for k, v in self._stats().items()}
-            summary.steps_line = clock.describe(summary.dt_min, summary.dt_max, counters)
-            if recorder is not None:
-                recorder.flush()
+            summary.steps_line = self.clock.describe(summary.dt_min, summary.dt_max, counters)
+            log.flush()
         return summary
 
     def _frame(self, frame: int, summary: RunSummary) -> tuple[Measurement, int, float]:
@@ -349,6 +328,41 @@ class Scene:
         notes, self._notes = self._notes, []
         summary.events.extend(text for _, text in notes if text not in self.warnings)  # warnings are listed apart
         return notes
+
+
+class _FrameLog:
+    """A run's recording: frame 0, every `record_every`-th frame, the last, and every frame with an event or a new
+    topology; the time it takes (frames 2..) goes to the summary. Without a recorder it only collects the events."""
+
+    def __init__(self, recorder, entity: str, record_every: int, frames: int, summary: RunSummary):
+        self.recorder, self.entity, self.every = recorder, entity, record_every
+        self.frames, self.summary = frames, summary
+
+    def begin(self, scene: Scene, translation) -> None:
+        events = scene._collect(self.summary)
+        if self.recorder is not None:
+            t0 = time.perf_counter()
+            self.recorder.begin_cloth(self.entity, scene.layout(), translation)
+            self.recorder.log_frame(self.entity, scene.snapshot(0, scene.measure(), events=events))
+            self.summary.wall_record += time.perf_counter() - t0
+
+    def frame(self, scene: Scene, frame: int, m: Measurement, steps_per_s: float | None, new_topology: bool) -> None:
+        events = scene._collect(self.summary)
+        due = frame % self.every == 0 or frame == self.frames or events or new_topology
+        if self.recorder is not None and due:
+            t0 = time.perf_counter()
+            self.recorder.log_frame(self.entity, scene.snapshot(frame, m, steps_per_s, events))
+            if frame > 1:
+                self.summary.wall_record += time.perf_counter() - t0
+
+    def blow_up(self, scene: Scene, frame: int, err: BlowUpError) -> None:
+        events = scene._collect(self.summary) + [("ERROR", str(err))]
+        if self.recorder is not None:
+            self.recorder.log_events(self.entity, frame, scene.state.t, events)
+
+    def flush(self) -> None:
+        if self.recorder is not None:
+            self.recorder.flush()
 
 
 def _progress_bar(frames: int, name: str):

@@ -74,11 +74,11 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from .assembly import STEP_GUARDS
 from .builder import ClothBuilder
 from .errors import MeshError, PatternError, SceneError
 from .integrators import INTEGRATORS
 from .quality import QUALITIES
-from .assembly import STEP_GUARDS
 from .scene import Scene
 from .schema import MATERIAL_TABLE, Array, Field, Table, Validator, at_least, material_of, nonneg, positive, read_toml
 
@@ -274,8 +274,8 @@ def build_scene(cfg: dict) -> Scene:
             g = cloth_cfg["grid"]
             data = ClothBuilder.grid(g["size"], g["resolution"], mat, g["center"], g["plane"])
         elif cloth_cfg.get("garment") is not None:
-            from .garment.garmentfile import load_garment
             from .garment.garment import build_garment
+            from .garment.garmentfile import load_garment
 
             path = Path(cloth_cfg["garment"])
             path = path if path.is_absolute() else cfg["_base_dir"] / path

@@ -12,7 +12,8 @@ from pathlib import Path
 from typing import Any, Callable
 
 from .errors import SceneError
-from .material import MATERIALS, Material, material as preset
+from .material import MATERIALS, Material
+from .material import material as preset
 
 MISSING = object()  # a Field default that makes the key required
 

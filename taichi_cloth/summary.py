@@ -53,6 +53,29 @@ class RunSummary:
         """Simulated seconds per wall second of stepping (> 1 is faster than real time)."""
         return self.timed_sim / self.wall_step if self.wall_step > 0 else float("nan")
 
+    def count_frame(self, frame: int, steps: int, wall: float, simulated: float, compiling: bool) -> None:
+        """A frame of `steps` steps took `wall` seconds for `simulated` seconds; `compiling`: it compiled the kernels
+        (the first frame of a run longer than one frame), so it stays out of the speed figures."""
+        self.frames, self.steps = frame, self.steps + steps
+        if compiling:
+            self.first_frame_wall = wall
+        else:
+            self.wall_step += wall
+            self.timed_steps += steps
+            self.timed_sim += simulated
+
+    def measured(self, m: Measurement) -> None:
+        """The frame's final measurement."""
+        self.final = m
+        self.max_strain_seen = max(self.max_strain_seen, m.max_strain)
+
+    def blew_up(self, frame: int, err) -> None:
+        """The run stopped at `frame` with a BlowUpError; the error carries this summary."""
+        self.frames = frame
+        self.blowup = str(err)
+        self.blowup_short = f"blew up by step {err.step} ({err.reason}); the error says what to change"
+        err.summary = self
+
     def took_step(self, dt: float) -> None:
         """Count dt [s] into the range of steps taken."""
         self.dt_min = dt if self.dt_min is None else min(self.dt_min, dt)
@@ -65,9 +88,9 @@ class RunSummary:
         if self.steps_line is not None:
             lines.append(f"  {self.steps_line}")
         if self.wall_step > 0:
-            lines.append(f"  speed: {self.steps_per_s:,.0f} steps/s, {1e3 * self.wall_step / max(self.timed_steps, 1):.3f} "
-                         f"ms/step, {self.realtime_factor:.2f}x real time (frames 2..; frame 1 with compiles took "
-                         f"{self.first_frame_wall:.2f} s)")
+            ms = 1e3 * self.wall_step / max(self.timed_steps, 1)
+            lines.append(f"  speed: {self.steps_per_s:,.0f} steps/s, {ms:.3f} ms/step, {self.realtime_factor:.2f}x "
+                         f"real time (frames 2..; frame 1 with compiles took {self.first_frame_wall:.2f} s)")
             if self.wall_record > 0:
                 lines.append(f"  recording: {1e3 * self.wall_record / max(self.frames - 1, 1):.2f} ms/frame, "
                              f"{100 * self.wall_record / (self.wall_step + self.wall_record):.1f} % of the loop")

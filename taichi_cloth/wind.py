@@ -12,8 +12,9 @@ import math
 import numpy as np
 import taichi as ti
 
-from .normals import VertexNormals
 from clothbase.fields import FieldBlock
+
+from .normals import VertexNormals
 
 
 @ti.data_oriented

@@ -31,9 +31,9 @@ def add_arguments(p) -> None:
 
 
 def _record(n: int, settle: float, steps: int):
+    from ..builder import ClothBuilder
     from ..colliders import body_mesh
     from ..scene import Scene
-    from ..builder import ClothBuilder
 
     v, t = body_mesh("mannequin")
     cloth = ClothBuilder.grid((1.2, 1.2), (n, n), "silk", center=(0.0, 1.73, 0.06), plane="xz")

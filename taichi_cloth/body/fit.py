@@ -137,7 +137,7 @@ def fit_body(targets: dict, blend: BlendShapes | None = None, gauge: GirthGauge 
     Raises BodyError for an unknown girth (listing the valid ones), a non-positive or non-finite target or
     tolerance, GirthOutOfRange for a target outside its channel's reachable range, and BodyError naming the
     girths still off if max_sweeps sweeps do not converge."""
-    from scipy.optimize import brentq   # 0.4 s to import: only when fitting
+    from scipy.optimize import brentq  # 0.4 s to import: only when fitting
 
     blend, gauge = _resolve(blend, gauge)
     if not isinstance(targets, dict) or not targets:

@@ -170,7 +170,7 @@ class GirthGauge:
         """Analyse a closed, outward-wound body in the mannequin's convention (placement.Body.from_mesh; raises
         MeshError for an unusable mesh) once and define the girths on it. underbust_height [m]: where the
         underbust is measured (default: the chest landmark - 0.05 m)."""
-        from ..garment.placement import Body   # placement imports this package: import it only when needed
+        from ..garment.placement import Body  # placement imports this package: import it only when needed
 
         body = Body.from_mesh(vertices, triangles)
         v, t = body.vertices, body.triangles

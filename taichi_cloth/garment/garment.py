@@ -14,7 +14,8 @@ import numpy as np
 
 from ..cloth import ClothData, SpringKind, mesh_cloth
 from ..errors import PatternError
-from ..material import Material, material as as_material
+from ..material import Material
+from ..material import material as as_material
 from .mesh import PieceMesh, mesh_piece
 from .pattern import PatternPiece
 from .placement import Body, place

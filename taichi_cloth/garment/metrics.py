@@ -14,7 +14,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 
-
 @dataclass
 class PieceQuality:
     """One piece: areas [m^2], boundary lengths [m], relative errors, edge strain (max |strain|, mean |strain|)."""

@@ -85,9 +85,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from collision.distance import candidates, pairs_by_cell, point_key, unsigned_distance
 from clothbase.errors import MeshError
 from clothbase.meshes import connected_components, validate_triangle_mesh
+from collision.distance import candidates, pairs_by_cell, point_key, unsigned_distance
 
 # the plane slicer and the convex-hull girth live with the body's girth gauge, which measures the same sections
 from ..body.section import Loop as _Loop

@@ -1,5 +1,5 @@
-"""Sewing (Chen 2013; Fan et al. 1998; docs/algorithms.md, sewing): seam springs pull the partners of every seam pair together,
-then the pairs are joined and the drape goes on.
+"""Sewing (Chen 2013; Fan et al. 1998; docs/algorithms.md, sewing): seam springs pull the partners of every seam
+pair together, then the pairs are joined and the drape goes on.
 
 A seam spring is a zero-rest-length spring F = k_s (x_b - x_a). Started at full strength across a gap of tens
 of centimetres it would fling the boundary through the body, so its rest length starts at the initial gap and
@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 import taichi as ti
 
-from clothbase.meshes import connected_components, edges_of
+from clothbase.meshes import connected_components, edges_of, rows_in
 
 from ..cloth import ClothData, SpringKind
 from ..control import Controller, FrameInfo, ModelChange
@@ -233,7 +233,7 @@ def merge_seams(data: ClothData, garment, x: np.ndarray, v: np.ndarray):
     # bend springs across the new (seam) edges: the hinges of the merged mesh not bent before
     pairs, L0 = hinges(tris, garment.rest_uv()[data.triangles])
     bent = np.sort(springs[kind == int(SpringKind.BEND)], axis=1)
-    new = ~_rows_in(pairs, bent)
+    new = ~rows_in(pairs, bent)
     if new.any():
         kb = garment.material.bend / np.maximum(L0[new], 1e-9) ** 2
         springs = np.concatenate([springs, pairs[new]])
@@ -273,11 +273,3 @@ def hinges(triangles: np.ndarray, tri_uv: np.ndarray):
     h2 = np.sqrt(np.maximum(sp**2 - u2**2, 0.0))
     pairs = np.sort(np.stack([r, s], 1), axis=1)
     return pairs, np.hypot(u1 - u2, h1 + h2)  # the apexes on opposite sides of the edge
-
-
-def _rows_in(rows: np.ndarray, table: np.ndarray) -> np.ndarray:
-    """(n,) bool: which rows of `rows` (n, 2) occur in `table` (m, 2) (int64 pairs)."""
-    if len(table) == 0:
-        return np.zeros(len(rows), dtype=bool)
-    key = lambda a: a[:, 0] * (int(max(rows.max(), table.max())) + 1) + a[:, 1]  # noqa: E731
-    return np.isin(key(rows), key(table))

@@ -17,8 +17,9 @@ import math
 
 import taichi as ti
 
-from .base import Integrator, Option, at_least_one, positive
 from clothbase.fields import FieldBlock
+
+from .base import Integrator, Option, at_least_one, positive
 
 
 @ti.data_oriented
