@@ -54,10 +54,19 @@ class Scene:
         self.steps_taken = 0
         self.topology_version = 0  # counts the changes of the cloth's triangles
         self._notes: list[tuple[str, str]] = []  # (level, text) since they were last collected
+        self._bind_hooks()
+
+    def _bind_hooks(self) -> None:
+        # the loop calls only the hooks a controller implements
         hooks = lambda name: [getattr(c, name) for c in self.controllers if overrides(c, name)]  # noqa: E731
         self._before_step, self._after_step = hooks("before_step"), hooks("after_step")
         self._after_frame, self._model_changed = hooks("after_frame"), hooks("model_changed")
         self._record = hooks("record")
+
+    def add_controller(self, controller) -> None:
+        """Add a controller of your own (a taichi_cloth.control.Controller): its hooks run after the scene's own."""
+        self.controllers.append(controller)
+        self._bind_hooks()
 
     def controller(self, name: str):
         """The controller called `name` ("pins", "colliders", "sewing", "refiner"...), or None if the scene has none."""

@@ -1,4 +1,5 @@
 """A scene builds and compiles only what it names; changing a parameter never recompiles."""
+import numpy as np
 import pytest
 import taichi as ti
 
@@ -73,3 +74,40 @@ def test_field_blocks_of_dead_owners_are_recycled():
         del owner, blk, f
         gc.collect()
     assert fields.live_trees() <= fields.LIVE_TREE_LIMIT + 2
+
+
+def test_a_feature_is_a_controller_added_without_touching_the_loop():
+    """A controller of one's own: it counts steps, switches gravity off after frame 3 (its change is applied by the
+    scene and noted as an event) and records a scalar; the loop runs it without knowing it."""
+    from taichi_cloth.control import Controller, ModelChange
+
+    class ZeroGravity(Controller):
+        name = "zero_g"
+
+        def __init__(self, forces):
+            self.forces, self.steps, self.frames = forces, 0, []
+
+        def after_step(self, t, dt):
+            self.steps += 1
+
+        def after_frame(self, frame):
+            self.frames.append(frame.frame)
+            if frame.frame == 3:
+                self.forces.set_gravity((0.0, 0.0, 0.0))
+                return ModelChange(event="gravity off")
+            return None
+
+        def record(self, frame):
+            frame.scalars["zero_g/steps"] = self.steps
+
+    sc = tc.Scene(grid(), dt=1 / 120)
+    zero_g = ZeroGravity(sc.forces)
+    sc.add_controller(zero_g)
+    assert sc.controller("zero_g") is zero_g
+    summary = sc.run(5, progress=False)
+    assert zero_g.steps == 10 and zero_g.frames == [1, 2, 3, 4, 5] and summary.events == ["gravity off"]
+    assert sc.snapshot(5, sc.measure()).scalars["zero_g/steps"] == 10
+    v = sc.velocities()  # free flight from frame 3 on: every particle keeps its velocity (drag aside)
+    sc.run(1, progress=False)
+    np.testing.assert_allclose(sc.velocities(), v * (1 - 0.1 / 120) ** 2, rtol=1e-3, atol=1e-5)
+    assert np.abs(v[:, 1]).min() > 0.3  # it was falling (1/20 s of gravity)
