@@ -405,7 +405,7 @@ def main():
             x = f32._bench_dv.to_numpy()[:n].astype(np.float64)
             res2 = f32.residual_norm(f32._bench_rhs, f32._bench_dv, H)
             frac = f", free-fall fraction {x[~op.pinned, 1].mean() / (-H * G):.3g}" if rhs_name == "fall" else ""
-            emit(f"\nSeed form (2 Jacobi sweeps from 0): residual {res2:.3g}, rel err "
+            emit(f"\nPublished form (2 Jacobi sweeps from 0): residual {res2:.3g}, rel err "
                  f"{np.linalg.norm(x - exact) / np.linalg.norm(exact):.3g}{frac}")
         emit("")
 

@@ -1,4 +1,4 @@
-"""Does multilevel pay? Seed 000's claim, measured: coarse-to-fine versus finest-level-only.
+"""Does multilevel pay? Hsiao 2006's claim, measured: coarse-to-fine versus finest-level-only.
 
 Scene: a 1 m cotton square held horizontally by one edge (--pins edge, the default) or by two corners, released,
 and left to come to rest (a 4-8

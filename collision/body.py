@@ -341,7 +341,7 @@ class MeshCollider(ParticleCollider):
 
 @ti.data_oriented
 class Repulsion:
-    """Seed 004 eq. (5), f_r = c_r exp(1/D) N for D <= d, in a form that neither overflows nor jumps
+    """Fan et al. 1998 eq. (5), f_r = c_r exp(1/D) N for D <= d, in a form that neither overflows nor jumps
     (docs/algorithms.md, collision warns that the published form is unit dependent, overflows float32 below 1.1 cm and is
     discontinuous at d). Ours, with D the particle's distance to the nearest face of the body:
 

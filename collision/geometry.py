@@ -7,7 +7,7 @@ EDGE_SLACK = 1e-6
 
 @ti.func
 def segment_triangle(p, q, a, b, c):
-    """Seed 004 eq. (15) by Moller-Trumbore: does the segment p -> q cross triangle (a, b, c)?
+    """Fan et al. 1998 eq. (15) by Moller-Trumbore: does the segment p -> q cross triangle (a, b, c)?
 
     Returns (hit, t) with t in [0, 1] the fraction of the segment at the crossing. A segment parallel to
     the plane (|det| below 1e-12 |e1||e2||d|) is no crossing: the proximity test handles it."""

@@ -1,6 +1,6 @@
 """Analytic colliders: spheres (Zhang et al. 2017), capsules and planes, for fast tests and a stand-in body.
 
-Seed 002's rule for spheres: a particle collides when |S - C| <= r_sphere + r_particle and is pushed along
+Zhang et al. 2017's rule for spheres: a particle collides when |S - C| <= r_sphere + r_particle and is pushed along
 (S - C) by alpha (r_sphere + r_particle - |S - C|), the pushes summed over all spheres (the norm is not
 squared; docs/algorithms.md). We add what a stand-in body needs: capsules (the same rule about the closest
 point of the axis), half-space planes (floors), a segment test so a particle that passes right through a
@@ -152,7 +152,7 @@ class PrimitiveColliders(ParticleCollider):
                 "planes": self.planes_np}
 
 
-#: Seed 002's idea of a body made of sphere colliders, as spheres and capsules sized from cross-sections of
+#: Zhang et al. 2017's idea of a body made of sphere colliders, as spheres and capsules sized from cross-sections of
 #: the shipped mannequin (A-pose, Y up, feet on y = 0, front +z): (center, radius) and (a, b, radius), metres.
 STANDIN_SPHERES = [((0.0, 1.55, 0.06), 0.085)]  # head
 STANDIN_CAPSULES = [

@@ -7,7 +7,7 @@ The system, per particle i and identical for the x, y and z components of dv:
 M the lumped masses [kg], L the spring-weighted graph Laplacian [N/m], h the time step [s]; rhs [kg m/s]
 (h f, plus h^2 J~ v with the jv_term), dv [m/s]. Pinned particles have dv_i = 0 and their rows are left out.
 
-Seed smoother, and why it is not enough: a Jacobi sweep damps only the high frequencies; a smooth error
+The paper's smoother, and why it is not enough: a Jacobi sweep damps only the high frequencies; a smooth error
 (uniform free fall is the extreme) loses a fraction m / (m + h^2 sum k) per sweep, ~1e-4 on a stiff
 129 x 129 sheet. Multigrid moves the smooth error to the coarser 4-8 levels, where it is rough again.
 

@@ -235,7 +235,7 @@ def test_implicit_solves_respect_contacts_no_stretch_around_a_small_ball():
 
 @pytest.mark.slow
 def test_repulsion_force_is_bounded_continuous_and_outward():
-    """Seed 004's repulsion in our form: 0 at and beyond the distance d, stiffness (e^(d/D) - e) inside,
+    """Fan et al. 1998's repulsion in our form: 0 at and beyond the distance d, stiffness (e^(d/D) - e) inside,
     max_force from D = d/10 down, along the outward normal."""
     box = trimesh.creation.box(extents=(1.0, 1.0, 1.0))  # top face at y = 0.5
     c_r, d, f_max = 1e-4, 0.01, 0.5

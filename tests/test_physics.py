@@ -32,7 +32,7 @@ def test_free_fall_matches_g_t2_over_2(integrator):
 
 
 def test_approx_implicit_first_step_is_the_published_formula():
-    """Seed 000 eq. (2) for a uniform field: an interior particle whose neighbours all have its K and m gets
+    """Hsiao 2006 eq. (2) for a uniform field: an interior particle whose neighbours all have its K and m gets
     dv = h g (1 - r^2), r = h^2 K / (m + h^2 K), exactly."""
     n, dt = 16, 1.0 / 120
     sc = tc.Scene(sheet(n, 1.0), integrator="approx-implicit", dt=dt, air_damping=0.0, precision="f64")

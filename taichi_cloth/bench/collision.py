@@ -1,6 +1,6 @@
 """Collision cost on the mannequin against the voxel size (`python -m taichi_cloth bench collision`).
 
-Seed 000's voxel trade-off.
+Hsiao 2006's voxel trade-off.
 
 For n x n cloths (1.2 m square, silk) dropped over the mannequin with the implicit integrator, after a
 settling period the benchmark records K consecutive steps (start and end positions, velocities) and

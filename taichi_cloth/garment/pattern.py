@@ -1,6 +1,6 @@
 """2D garment pattern pieces: closed outlines made of line, polyline, arc and B-spline segments.
 
-Seed paper (000, section 3): piece outlines are B-spline curves. Seed 003: closed DXF polylines, splines and
+Hsiao 2006 (section 3): piece outlines are B-spline curves. Chen 2013: closed DXF polylines, splines and
 arcs become pieces (see `taichi_cloth.garment.dxf`). All coordinates are float64 METRES; constructors that take
 user numbers take a `units` argument ("m", "cm", "mm", "in") and convert once, on the way in.
 

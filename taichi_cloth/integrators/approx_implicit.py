@@ -5,7 +5,7 @@ Linearised backward Euler (M - h^2 J) dv = h f with the spring Jacobian replaced
 
     dv_i <- ( h f_i + h^2 sum_j k_ij dv_j ) / ( m_i + h^2 sum_j k_ij )
 
-Seed form (the default, exactly as published): two sweeps from dv = 0 and no h J~ v term, i.e.
+Published form (the default, exactly as in Hsiao 2006): two sweeps from dv = 0 and no h J~ v term, i.e.
     dv~_j = h f_j / (m_j + h^2 k n_j),  dv_i = (h f_i + h^2 k sum_j dv~_j) / (m_i + h^2 k n_i),
 with per-spring k_ij in place of the single k (docs/algorithms.md, approximate implicit step). Then v += dv, x += h v.
 
