@@ -10,6 +10,7 @@ import math
 from dataclasses import dataclass, field
 
 from clothbase.errors import warn
+from collision.self_collision import SelfCollision
 
 from .adaptive import AdaptiveOptions, AdaptiveStep
 from .clock import FixedStep
@@ -100,8 +101,6 @@ def assemble(cloth, *, name: str = "cloth", integrator: str = DEFAULT_INTEGRATOR
     wind_source = Wind(model, state, **wind) if wind is not None else None
     objects = build_colliders(colliders, base_dir) if colliders else []
     if self_collision:  # first, so that the body colliders have the last word on every position
-        from collision.self_collision import SelfCollision
-
         options = self_collision if isinstance(self_collision, dict) else {}
         objects.insert(0, SelfCollision(model.data.triangles, model.data.positions, **options))
     collide = None

@@ -20,6 +20,7 @@ from pathlib import Path
 
 from clothbase.meshes import load_triangle_mesh
 from collision import MeshCollider, PrimitiveColliders
+from collision.self_collision import SelfCollision
 
 from .control import Controller
 
@@ -111,9 +112,9 @@ class Colliders(Controller):
         out: dict[str, int] = {}
         for c in self.objects:
             if hasattr(c, "counter_values"):
+                prefix = "self-collision" if isinstance(c, SelfCollision) else "collision"
                 for key, value in c.counter_values().items():
-                    name = f"{'self-collision' if c.describe()['kind'] == 'self' else 'collision'} {key}"
-                    out[name] = out.get(name, 0) + value
+                    out[f"{prefix} {key}"] = out.get(f"{prefix} {key}", 0) + value
         return out
 
     @property
