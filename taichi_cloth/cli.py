@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import shutil
 import sys
 from pathlib import Path
@@ -200,4 +201,8 @@ def main(argv=None) -> int:
     if argv and argv[0] == "bench" and (len(argv) == 1 or argv[1] not in SUITES + ("-h", "--help")):
         argv.insert(1, "integrators")  # `bench` alone is the integrator benchmark
     args = parser.parse_args(argv)
-    return args.func(args)
+    try:
+        return args.func(args)
+    except BrokenPipeError:  # the reader went away (`... | head`): nothing left to say to it
+        sys.stdout = open(os.devnull, "w")  # noqa: SIM115 (so that the exit flush does not fail again)
+        return 0
