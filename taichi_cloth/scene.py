@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .assembly import assemble
 from .control import FrameInfo, ModelChange, overrides
 from .diagnostics import Diagnostics, Measurement
 from .errors import BlowUpError
@@ -40,8 +41,6 @@ class Scene:
     """
 
     def __init__(self, cloth, **options):
-        from .assembly import assemble
-
         parts = assemble(cloth, **options)
         self.name = parts.name
         self.model, self.state, self.forces = parts.model, parts.state, parts.forces
