@@ -46,6 +46,9 @@ class FieldBlock:
     def vector(self, n: int, dtype, shape):
         return self._place(ti.Vector.field(n, dtype), shape)
 
+    def matrix(self, n: int, m: int, dtype, shape):
+        return self._place(ti.Matrix.field(n, m, dtype), shape)
+
     def finalize(self, owner) -> None:
         global _live
         self.tree = self.builder.finalize()

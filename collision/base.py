@@ -6,12 +6,16 @@ from clothbase.fields import FieldBlock
 
 @ti.data_oriented
 class ParticleCollider:
+    #: run the kernels' loops in one thread (a small cloth on the CPU: the scene says so when it attaches)
+    serial = False
+
     """Base of the colliders. After `attach`, x, v [m, m/s] and inv_mass [1/kg] are the cloth's (P,) fields,
     n_particles its 0-d live count, x_start (P,) the positions at the start of the step, and contact_normal
     (optional (P,) vec3 field) receives the unit normal of each contact made, for the implicit integrators."""
 
-    def attach(self, x, v, inv_mass, n_particles, contact_normal=None) -> None:
+    def attach(self, x, v, inv_mass, n_particles, contact_normal=None, serial: bool = False) -> None:
         self.x, self.v, self.inv_mass, self.n_particles = x, v, inv_mass, n_particles
+        self.serial = bool(serial)
         self.contact_normal = contact_normal
         self.records_contacts = contact_normal is not None
         blk = FieldBlock()
@@ -30,6 +34,7 @@ class ParticleCollider:
 
     @ti.kernel
     def _copy_start(self):
+        ti.loop_config(serialize=self.serial)
         for i in range(self.n_particles[None]):
             self.x_start[i] = self.x[i]
 

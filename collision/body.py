@@ -98,6 +98,7 @@ class MeshCollider(ParticleCollider):
 
     @ti.kernel
     def _compute_normals(self):
+        ti.loop_config(serialize=self.serial)
         for t in range(self.n_triangles[None]):
             c = self.triangles[t]
             a = self.vertices[c[0]]
@@ -257,6 +258,7 @@ class MeshCollider(ParticleCollider):
     def _resolve(self, thickness: ti.f64, friction: ti.f64):
         # counters accumulate in kernel locals (reduced per thread), not in contended global atomics
         queries, candidates, overflows, tests_done, crossings, contacts = 0, 0, 0, 0, 0, 0
+        ti.loop_config(serialize=self.serial)
         for i in range(self.n_particles[None]):
             if self.inv_mass[i] != 0:
                 p = self.x_start[i]
@@ -321,6 +323,7 @@ class MeshCollider(ParticleCollider):
     @ti.kernel
     def _signed_distance(self, pts: ti.types.ndarray(dtype=ti.math.vec3, ndim=1),
                          out: ti.types.ndarray(dtype=ti.f64, ndim=1)):
+        ti.loop_config(serialize=self.serial)
         for k in range(pts.shape[0]):
             p = ti.cast(pts[k], ti.f64)
             best = ti.cast(1e30, ti.f64)

@@ -27,10 +27,11 @@ class VoxelGrid:
 
     def __init__(self, vertices, triangles, n_triangles, cell_size: float, pad: float, margin: float,
                  vertices_np: np.ndarray, triangles_np: np.ndarray, grow: float = 1.25, hashed: bool = False,
-                 vertices_start=None):
+                 vertices_start=None, serial: bool = False):
         if not cell_size > 0:
             raise ValueError(f"voxel cell size must be > 0 m, got {cell_size}")
         self.vertices, self.triangles, self.n_triangles = vertices, triangles, n_triangles
+        self.serial = bool(serial)  # loops in one thread (a grid rebuilt every step over a small cloth)
         self.vertices_start = vertices_start
         self.swept = vertices_start is not None
         self.cell_size, self.pad, self.margin, self.hashed = float(cell_size), float(pad), float(margin), hashed
@@ -119,8 +120,10 @@ class VoxelGrid:
 
     @ti.kernel
     def _count(self):
+        ti.loop_config(serialize=self.serial)
         for c in range(self.n_cells):
             self.cell_count[c] = 0
+        ti.loop_config(serialize=self.serial)
         for t in range(self.n_triangles[None]):
             lo, hi = self.triangle_box(t)
             cmin, cmax = self.clamp_range(lo, hi)
@@ -132,6 +135,7 @@ class VoxelGrid:
         # an exclusive prefix sum; serial, it is ~1e5 additions once per build
         ti.loop_config(serialize=True)
         total = 0
+        ti.loop_config(serialize=self.serial)
         for c in range(self.n_cells):
             self.cell_start[c] = total
             total += self.cell_count[c]
@@ -140,8 +144,10 @@ class VoxelGrid:
 
     @ti.kernel
     def _fill(self):
+        ti.loop_config(serialize=self.serial)
         for c in range(self.n_cells):
             self.cell_count[c] = 0  # reused as the fill cursor
+        ti.loop_config(serialize=self.serial)
         for t in range(self.n_triangles[None]):
             lo, hi = self.triangle_box(t)
             cmin, cmax = self.clamp_range(lo, hi)

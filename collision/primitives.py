@@ -92,6 +92,7 @@ class PrimitiveColliders(ParticleCollider):
 
     @ti.kernel
     def _resolve(self):
+        ti.loop_config(serialize=self.serial)
         for i in range(self.n_particles[None]):
             if self.inv_mass[i] != 0:
                 p = ti.cast(self.x_start[i], ti.f32)

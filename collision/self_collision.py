@@ -57,7 +57,7 @@ class SelfCollision(ParticleCollider):
         # built at once, on boxes swept from x_start (= x now) to x
         self.grid = VoxelGrid(self.x, self.triangles, self.n_triangles, self.cell_size, pad=self.thickness,
                               margin=0.0, vertices_np=self.rest_np, triangles_np=self.triangles_np, hashed=True,
-                              vertices_start=self.x_start)
+                              vertices_start=self.x_start, serial=self.serial)
 
     def resolve(self, dt: float) -> None:
         self.grid.build()
@@ -78,6 +78,7 @@ class SelfCollision(ParticleCollider):
     @ti.kernel
     def _resolve(self):
         tau = ti.cast(self.thickness, ti.f32)
+        ti.loop_config(serialize=self.serial)
         for i in range(self.n_particles[None]):
             if self.inv_mass[i] != 0:
                 p0 = ti.cast(self.x_start[i], ti.f32)

@@ -150,8 +150,8 @@ class Hierarchy48:
     @classmethod
     def from_base(cls, uv: np.ndarray, triangles: np.ndarray, levels: int) -> "Hierarchy48":
         """Refine a base 4-8 triangulation (hypotenuse-first triangles) levels-1 times."""
-        if not 1 <= levels <= 10:
-            raise ValueError(f"levels must lie in 1..10, got {levels}")
+        if not 1 <= levels <= 12:
+            raise ValueError(f"levels must lie in 1..12, got {levels}")
         n = len(uv)
         parents, weights = identity_tables(n)
         out = [Level(np.asarray(uv, np.float64), np.asarray(triangles, np.int64), parents, weights,

@@ -21,9 +21,10 @@ class Prolongation:
 
     P is the capacity (the finest level's vertex count)."""
 
-    def __init__(self, capacity: int, fp=ti.f32):
+    def __init__(self, capacity: int, fp=ti.f32, serial: bool = False):
         self.capacity = int(capacity)
         self.fp = fp
+        self.serial = bool(serial)  # loops in one thread (small cloths on the CPU)
         blk = FieldBlock()
         self.parent = blk.scalar(ti.i32, (self.capacity, 3))
         self.weight = blk.scalar(fp, (self.capacity, 3))
@@ -49,9 +50,11 @@ class Prolongation:
 
     @ti.kernel
     def _apply(self, x: ti.template(), v: ti.template(), n_old: ti.i32, n_new: ti.i32):
+        ti.loop_config(serialize=self.serial)
         for i in range(n_old):
             self.scratch_x[i] = x[i]
             self.scratch_v[i] = v[i]
+        ti.loop_config(serialize=self.serial)
         for k in range(n_new):
             px = ti.Vector.zero(self.fp, 3)
             pv = ti.Vector.zero(self.fp, 3)

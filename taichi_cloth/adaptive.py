@@ -234,6 +234,7 @@ class AdaptiveStep:
 
     @ti.kernel
     def _copy(self, x_to: ti.template(), x_from: ti.template(), v_to: ti.template(), v_from: ti.template()):
+        ti.loop_config(serialize=self.model.serial)
         for i in range(self._n[None]):
             x_to[i] = x_from[i]
             v_to[i] = v_from[i]

@@ -111,7 +111,7 @@ def assemble(cloth, *, name: str = "cloth", integrator: str = DEFAULT_INTEGRATOR
     forces = ForceModel(model, state, gravity, air_damping, sources)
     stepper = integrator_class(integrator)(model, state, forces, **(integrator_options or {}))
     if getattr(stepper, "needs_levels", False):
-        _attach_levels(stepper, integrator, source, multilevel, specs)
+        _attach_levels(stepper, integrator, source, multilevel, specs, parts_warnings)
 
     if auto:
         try:
@@ -205,16 +205,29 @@ def _check_step_options(dt, adaptive, fps, step_guard) -> bool:
     return auto
 
 
-def _attach_levels(stepper, integrator: str, source: _Source, multilevel, specs) -> None:
-    """Give a multigrid integrator the 4-8 levels of the cloth (global refinement only)."""
+def _attach_levels(stepper, integrator: str, source: _Source, multilevel, specs, notes: list) -> None:
+    """Give an integrator that asks for them the cloth's 4-8 levels (nested ones: global refinement). One that
+    cannot do without them refuses the scene; the implicit integrator's multigrid preconditioner falls back to
+    Jacobi (and says so when it was asked for by name)."""
     ml = source.multilevel
-    if ml is not None and (multilevel or {}).get("refine") == "local":
-        raise SceneError("multigrid_cycles needs the nested levels of global refinement, not refine = local")
+    why = None
     if ml is None:
-        raise SceneError(f"integrator {integrator!r} with multigrid_cycles needs a multilevel cloth "
-                         "([multilevel] in a scene file, ClothBuilder.multilevel_grid in Python)")
-    stepper.attach_levels(ml.hierarchy.levels, ml.levels, [pinned_mask(specs, d.positions) for d in ml.levels],
-                          ml.start_level)
+        why = "needs a multilevel cloth ([multilevel] in a scene file, ClothBuilder.multilevel_grid in Python)"
+    elif (multilevel or {}).get("refine") == "local":
+        why = "needs the nested levels of global refinement, not refine = local"
+    if why is None:
+        try:
+            stepper.attach_levels(ml.hierarchy.levels, ml.levels, [pinned_mask(specs, d.positions) for d in ml.levels],
+                                  ml.start_level)
+            return
+        except ValueError as err:  # e.g. levels that are not nested (outlines), a coarsest level too large
+            why = str(err)
+    if getattr(stepper, "levels_required", True):
+        raise SceneError(f"integrator {integrator!r} with multigrid_cycles {why}")
+    if stepper.options.get("preconditioner") == "multigrid":
+        msg = f"the multigrid preconditioner {why}; integrator {integrator!r} uses Jacobi instead"
+        notes.append(msg)
+        warn(msg)
 
 
 def _sewing(model, state, forces, garment, options: dict | None):

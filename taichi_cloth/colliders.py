@@ -97,7 +97,7 @@ class Colliders(Controller):
         self.objects, self.contacts = list(objects), contacts
         self.moving: set[int] = set()
         for c in self.objects:
-            c.attach(state.x, state.v, model.inv_mass, model.n_particles, contacts.normal)
+            c.attach(state.x, state.v, model.inv_mass, model.n_particles, contacts.normal, model.serial)
 
     @property
     def thickness(self) -> float | None:

@@ -22,14 +22,18 @@ class Contacts:
         self.normal = blk.vector(3, model.fp, model.capacity[0])
         blk.finalize(self)
 
-    def clear(self) -> None:
-        self.normal.fill(0)
+    @ti.kernel
+    def clear(self):
+        ti.loop_config(serialize=self.model.serial)
+        for i in range(self.model.n_particles[None]):
+            self.normal[i] = ti.Vector.zero(self.model.fp, 3)
 
     @ti.func
     def filter(self, i, vec):
         """vec without its component along particle i's contact normal (vec itself when i is not in contact)."""
         n = self.normal[i]
         out = vec
-        if n.dot(n) > 0:
-            out = vec - vec.dot(n) * n
+        nn = n.dot(n)
+        if nn > 0:  # divided by |n|^2: a normal written in float32 is unit only to 1e-7, and S must be a projector
+            out = vec - vec.dot(n) / nn * n
         return out

@@ -57,6 +57,7 @@ class Diagnostics:
         max_strain = ti.cast(0.0, ti.f64)
         nonfinite = 0
         g = ti.cast(self.forces.gravity[None], ti.f64)
+        ti.loop_config(serialize=self.model.serial)
         for i in range(m.n_particles[None]):
             x = ti.cast(s.x[i], ti.f64)
             v = ti.cast(s.v[i], ti.f64)
@@ -71,6 +72,7 @@ class Diagnostics:
                 kinetic += 0.5 * mass * v.dot(v)
                 gravity -= mass * g.dot(x)
                 ti.atomic_max(max_speed, v.norm())
+        ti.loop_config(serialize=self.model.serial)
         for sp in range(m.n_springs[None]):
             d = ti.cast(s.x[m.spring_b[sp]] - s.x[m.spring_a[sp]], ti.f64)
             l = d.norm()

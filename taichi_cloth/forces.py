@@ -83,6 +83,7 @@ class ForceModel:
     @ti.kernel
     def compute(self, with_drag: ti.template()):
         """f[i] = particle_force(i) for every particle (pinned ones included: the residual test reads them)."""
+        ti.loop_config(serialize=self.model.serial)
         for i in range(self.model.n_particles[None]):
             self.f[i] = self.particle_force(i, with_drag)
 

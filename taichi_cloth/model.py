@@ -12,7 +12,7 @@ import taichi as ti
 from clothbase.fields import FieldBlock
 
 from .cloth import ClothData
-from .runtime import ensure_initialized
+from .runtime import ensure_initialized, serial_loops
 
 _PRECISIONS = {"f32": ti.f32, "f64": ti.f64}
 
@@ -61,6 +61,8 @@ class Model:
         if cp < P or cs < S or ct < T:
             raise ValueError(f"capacity {capacity} is below the cloth's size {(P, S, T)}")
         self.capacity = (cp, cs, ct)
+        #: the kernels of this cloth run their loops in one thread (small cloths on the CPU: runtime.serial_loops)
+        self.serial = serial_loops(cp)
         fp = self.fp
         blk = FieldBlock()
         self.n_particles = blk.scalar(ti.i32, ())

@@ -39,16 +39,20 @@ class VertexNormals:
 
     @ti.kernel
     def compute(self, unit: ti.template()):
+        ti.loop_config(serialize=self.model.serial)
         for t in range(self.model.n_triangles[None]):
             self.triangle_area[t] = self.triangle_area_vector(t)
+        ti.loop_config(serialize=self.model.serial)
         for i in range(self.model.n_particles[None]):
             self.normal[i] = self.vertex_normal(i, unit)
 
     @ti.kernel
     def _snapshot(self, positions: ti.types.ndarray(dtype=ti.math.vec3, ndim=1),
                   normals: ti.types.ndarray(dtype=ti.math.vec3, ndim=1)):
+        ti.loop_config(serialize=self.model.serial)
         for t in range(self.model.n_triangles[None]):
             self.triangle_area[t] = self.triangle_area_vector(t)
+        ti.loop_config(serialize=self.model.serial)
         for i in range(self.model.n_particles[None]):
             normals[i] = ti.cast(self.vertex_normal(i, True), ti.f32)
             positions[i] = ti.cast(self.state.x[i], ti.f32)

@@ -126,6 +126,7 @@ class PinDriver:
 
     @ti.kernel
     def _place(self, n: ti.i32):
+        ti.loop_config(serialize=self.model.serial)
         for p in range(n):
             i = self.pin_index[p]
             g = self.pin_group[p]

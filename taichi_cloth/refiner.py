@@ -92,7 +92,7 @@ class Refiner(Controller):
         # the scene's dt belongs to the finest level; a coarser level may step dt_growth times larger per
         # level (the edge length grows by sqrt(2) per level, and with it the explicit step limit)
         self.dt_growth = float(dt_growth)
-        self.prolongation = Prolongation(cloth.capacity[0], model.fp)
+        self.prolongation = Prolongation(cloth.capacity[0], model.fp, model.serial)
         finest = cloth.levels[-1]
         diameter = float(np.linalg.norm(np.ptp(finest.positions, axis=0)))
         self.energy_scale = max(float(finest.mass.sum()) * float(np.linalg.norm(gravity)) * diameter, 1e-12)

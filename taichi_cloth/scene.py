@@ -268,7 +268,7 @@ class Scene:
         if frames < 0:
             raise ValueError("frames must be >= 0")
         summary = RunSummary(self.name, self.integrator.name, self.clock.dt, self.clock.auto,
-                             self.model.data.n_particles, self.model.data.n_springs)
+                             self.model.data.n_particles, self.model.data.n_springs, solver=self.integrator.detail)
         start = (self.state.t, self._stats(), self.clock.counters())
         log = _FrameLog(recorder, entity or "cloth", record_every, frames, summary)
         log.begin(self, translation)

@@ -253,7 +253,7 @@ def _check_integrator_options(v: Validator, integ: dict) -> None:
             known = ", ".join(cls.OPTIONS) or "none"
             v.fail("[integrator]", f"unknown key {key!r} for integrator {integ['name']!r} (its options: {known})")
         val = integ[key]
-        kind = {bool: "bool", int: "int", float: "number"}[opt.type]
+        kind = {bool: "bool", int: "int", float: "number", str: "str"}[opt.type]
         integ[key] = v.value(Field(kind, check=opt.check), val, where)
 
 

@@ -83,6 +83,7 @@ class StretchLimit(Controller):
         limit = 1.0 + ti.cast(max_strain, m.fp)
         w = ti.cast(omega, m.fp)
         worst = ti.cast(0.0, ti.f64)
+        ti.loop_config(serialize=self.model.serial)
         for i in range(m.n_particles[None]):
             acc = ti.Vector.zero(m.fp, 3)
             count = 0
@@ -101,6 +102,7 @@ class StretchLimit(Controller):
                             acc += wi / (wi + m.inv_mass[j]) * (l - lmax) / l * d
                             count += 1
             self.dx[i] = w * acc / ti.max(count, 1)
+        ti.loop_config(serialize=self.model.serial)
         for i in range(m.n_particles[None]):
             s.x[i] += self.dx[i]
             s.v[i] += self.dx[i] / h

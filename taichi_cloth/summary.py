@@ -40,6 +40,7 @@ class RunSummary:
     dt_max: float | None = None
     timed_sim: float = 0.0
     steps_line: str | None = None
+    solver: str | None = None  # how the integrator solves its step (e.g. its preconditioner)
     events: list[str] = field(default_factory=list)  # what happened on the way (seams joined, level switches...)
     outputs: list[str] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
@@ -83,7 +84,8 @@ class RunSummary:
 
     def format(self) -> str:
         lines = [f"scene {self.name!r}: {self.n_particles} particles, {self.n_springs} springs, "
-                 f"integrator {self.integrator}, dt = {'auto' if self.auto else f'{self.dt:.3g} s'}",
+                 f"integrator {self.integrator}{f' ({self.solver})' if self.solver else ''}, "
+                 f"dt = {'auto' if self.auto else f'{self.dt:.3g} s'}",
                  f"  ran {self.frames} frames, {self.steps} steps, {self.sim_time:.3f} s simulated"]
         if self.steps_line is not None:
             lines.append(f"  {self.steps_line}")

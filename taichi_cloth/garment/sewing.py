@@ -131,6 +131,7 @@ class Sewing(Controller):
     @ti.kernel
     def _ramp(self, first: ti.i32, count: ti.i32, shrink: ti.f64, max_force: ti.f64):
         m = self.model
+        ti.loop_config(serialize=self.model.serial)
         for k in range(count):
             s = first + k
             l = ti.cast((self.x[m.spring_b[s]] - self.x[m.spring_a[s]]).norm(), ti.f64)

@@ -25,6 +25,11 @@ def at_least_one(v):
     return None if v >= 1 else "must be >= 1"
 
 
+def one_of(choices):
+    """A check that the value is one of `choices`."""
+    return lambda v: None if v in choices else f"must be one of {', '.join(choices)}"
+
+
 @ti.data_oriented
 class Integrator:
     """Base class. Subclasses set `name`, `OPTIONS`, `unconditionally_stable` and implement `_advance(dt)`.
@@ -82,6 +87,11 @@ class Integrator:
         """The particles and springs were refilled (a multilevel switch to `level`, 0-based) and x, v
         prolonged: by default forget any history."""
         self.reset()
+
+    @property
+    def detail(self) -> str | None:
+        """How this integrator solves its step, for the run summary (None: nothing to add to its name)."""
+        return None
 
     def unstable_advice(self) -> str | None:
         """A hint for the blow-up message beyond "a smaller step" (e.g. an option known to be unstable), or None."""

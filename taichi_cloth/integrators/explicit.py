@@ -13,8 +13,10 @@ class SymplecticEuler(Integrator):
     def _advance(self, dt: ti.f64):
         m, s, fm = self.model, self.state, self.forces
         h = ti.cast(dt, m.fp)
+        ti.loop_config(serialize=self.model.serial)
         for i in range(m.n_particles[None]):
             fm.f[i] = fm.particle_force(i, True)
+        ti.loop_config(serialize=self.model.serial)
         for i in range(m.n_particles[None]):
             if m.inv_mass[i] != 0:
                 s.v[i] += h * m.inv_mass[i] * fm.f[i]

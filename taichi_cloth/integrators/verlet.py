@@ -44,8 +44,10 @@ class HistoryIntegrator(Integrator):
         m, s, fm = self.model, self.state, self.forces
         h = ti.cast(dt, m.fp)
         c = ti.cast(c_, m.fp)
+        ti.loop_config(serialize=self.model.serial)
         for i in range(m.n_particles[None]):
             fm.f[i] = fm.particle_force(i, False)
+        ti.loop_config(serialize=self.model.serial)
         for i in range(m.n_particles[None]):
             if m.inv_mass[i] != 0:
                 a = m.inv_mass[i] * fm.f[i]
