@@ -59,12 +59,6 @@ def test_body_fitted_before_the_run_carries_the_collider_and_the_placement():
     assert body.girths["hips"] == pytest.approx(0.92, abs=0.01)
 
 
-def hip_band_radius(x: np.ndarray, hips: float) -> float:
-    """Mean horizontal distance [m] from the body's axis of the cloth particles within 3 cm of hip height."""
-    band = np.abs(x[:, 1] - hips) < 0.03
-    return float(np.hypot(x[band, 0], x[band, 2] - 0.04).mean())
-
-
 def sewn_skirt(body_morph=None):
     spec = load_garment(DEMOS / "garments" / "skirt.toml")
     spec.spacing = 0.03
@@ -91,13 +85,15 @@ def test_skirt_follows_a_body_that_grows_during_the_drape():
     assert morph.done
     np.testing.assert_array_equal(scene.controller("colliders").objects[0].vertices_np, fit.vertices)
     assert garment_quality(scene).penetrations == 0
-    # the same skirt on the unchanged body, to the same time: on the grown body (5 cm more hip girth, 8 mm of
-    # radius) the skirt sits wider at the hips (it went out with the body rather than through it)
+    # the same skirt on the unchanged body, to the same time, rests on the hips: measured against the grown body
+    # (5 cm more hip girth, 8 mm of radius) dozens of its particles lie inside, where the morphed drape has none
+    # (the skirt went out with the body rather than through it). Any band average of the radius would be blurred
+    # by the sway of a drape that is not yet at rest.
     control = sewn_skirt()
     control.run(int(round(scene.state.t * 60)), progress=False)
-    hips = scene.controller("sewing").garment.body.landmarks["hips"]
-    grown, unchanged = hip_band_radius(scene.positions(), hips), hip_band_radius(control.positions(), hips)
-    assert grown - unchanged > 0.004, (grown, unchanged)
+    grown_body = scene.controller("colliders").objects[0]
+    inside = int(np.count_nonzero(grown_body.signed_distance(control.positions()) < 0.0))
+    assert inside >= 10, inside
 
 
 def test_a_morph_faster_than_the_collider_can_follow_is_refused():
