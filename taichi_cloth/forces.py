@@ -66,6 +66,14 @@ class ForceModel:
         return m.stiffness[s] * (l - m.rest_length[s]) * u + m.damping[s] * (self.state.v[j] - vi).dot(u) * u
 
     @ti.func
+    def source_force(self, i, xi, vi):
+        """The force [N] of the scene's sources (wind, body repulsion) on particle i at xi, vi (0 without any)."""
+        f = ti.Vector.zero(self.model.fp, 3)
+        for k in ti.static(range(len(self.sources))):
+            f += self.sources[k].force(i, xi, vi)
+        return f
+
+    @ti.func
     def particle_force(self, i, with_drag: ti.template()):
         """Total force [N] on particle i: gravity, springs, drag (if with_drag), and the scene's sources."""
         m = self.model

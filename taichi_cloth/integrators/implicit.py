@@ -1,25 +1,42 @@
-"""Backward Euler with the full spring Jacobians (Baraff and Witkin 1998), solved by modified PCG.
+"""Backward Euler with the full spring Jacobians (Baraff and Witkin 1998), as the minimisation of the incremental
+potential, by Newton iterations with a line search; each Newton system solved by preconditioned CG.
 
-One linearised solve per step (BW98 eq. 15):
-    A dv = b,  A = M(1 + h gamma) - h df/dv - h^2 df/dx,  b = h (f0 + h (df/dx) v0)
-then v += dv, x += h v. Per spring (u = unit direction, l = length, L0 = rest length):
+A step from (x0, v0) finds the velocity v that minimises (Martin et al. 2011, "example-based elastic materials";
+Gast et al. 2015, "optimization integrator for large time steps")
+
+    IP(v) = 1/2 (v - v0)^T M (v - v0) + Phi(x0 + h v) + h/2 v^T C v - h F_ext . v,
+
+Phi = spring + gravity potential [J], C = gamma M + sum_s kd u u^T (air drag and spring damping, u frozen per
+Newton iteration), F_ext the wind and body repulsion at the iterate. Its gradient is M (v - v0) - h f(x0 + h v, v)
+with f the engine's total force, so IP is stationary exactly at the backward-Euler step. Newton iteration k, from
+v_k (v_0 = v0, so x_0 = x0 + h v0):
+
+    A dv = b,  A = M (1 + h gamma) + h D + h^2 K(x_k),  b = h f(x_k, v_k) - M (v_k - v0)
+
+per spring (u = unit direction, l = length, L0 = rest length):
     K_s = k [ u u^T + max(0, 1 - L0/l) (I - u u^T) ]   (stiffness; the clamp keeps A SPD, Choi and Ko 2002)
     D_s = kd u u^T                                     (spring damping)
-so the product is (A q)_i = m_i (1 + h gamma) q_i + sum_s [ (h kd + h^2 k (1-g)) u (u.dq) + h^2 k g dq ],
-dq = q_i - q_j, g = max(0, 1 - L0/l). It is evaluated matrix-free with a per-particle gather.
+so (A q)_i = m_i (1 + h gamma) q_i + sum_s [ (h kd + h^2 k (1-g)) u (u.dq) + h^2 k g dq ], dq = q_i - q_j,
+evaluated matrix-free with a per-particle gather. Then a line search: IP at v_k + alpha dv for alpha = 1, 1/2, 1/4,
+1/8 in one kernel, the largest alpha with IP(v_k + alpha dv) <= IP(v_k) + 1e-4 alpha grad.dv is taken (on the
+device: no host read-back). One Newton iteration with alpha = 1 is the classical one-solve-per-step implicit
+Euler; the line search is what keeps large steps from gaining energy (one linearised solve overshoots a spring
+that rotates, and at 1/30 s a sheet dropped on a ball gained 4 x its weight x size of energy).
+
 Pinned particles are filtered out of the solve (BW98 section 5.3, S_i = 0), and a particle in contact with a
 collider in the last step has its normal component filtered (S_i = I - n n^T: its normal velocity does not
 change in the solve, the collider handles it).
 
 Preconditioners (option `preconditioner`):
-  jacobi     the diagonal of A, inline in the CG kernels, CHUNK iterations per launch;
+  jacobi     the diagonal of A, inline in the CG kernels, CHUNK iterations per launch; CG starts from the last
+             step's velocity change;
   multigrid  a V(1,1) cycle over the cloth's nested 4-8 levels (multilevel.spring_multigrid: the same system
              rediscretised on every level), applied as z = S V(S r), which keeps the preconditioner symmetric on
              the free subspace; one V-cycle per CG iteration;
   auto       (the default) multigrid where the cloth has nested 4-8 levels (a [multilevel] grid with global
              refinement), jacobi elsewhere. The run summary names the one used.
-CG stops when sqrt(r.z / b.z0) <= cg_tolerance (z = the preconditioned residual: D^-1 r, or the V-cycle's) or after
-cg_max_iterations. (A test on |r| alone stopped multigrid-CG at bad points: twice the error at a tolerance of 0.1.)
+CG stops when sqrt(r.z / b.z_b) <= cg_tolerance (z = the preconditioned residual: D^-1 r, or the V-cycle's; z_b the
+preconditioned b, so that a warm start that begins close stops early) or after cg_max_iterations. (A test on |r| alone stopped multigrid-CG at bad points: twice the error at a tolerance of 0.1.)
 """
 
 import math
@@ -42,11 +59,20 @@ class Implicit(Integrator):
         "cg_max_iterations": Option(int, 200, "CG iteration cap per step", at_least_one),
         "preconditioner": Option(str, "auto", "jacobi | multigrid (V-cycles over the cloth's nested 4-8 levels) | "
                                  "auto (multigrid where the cloth has them)", one_of(PRECONDITIONERS)),
+        "newton_iterations": Option(int, 4, "the most Newton iterations per step (each one CG solve and a line "
+                                    "search); the first is enough when the step does not gain energy", at_least_one),
+        "newton_tolerance": Option(float, 1e-2, "or stop when the Newton decrement (-grad.dv [J]) falls below this "
+                                   "fraction of the first one's", positive),
+        "line_search": Option(bool, True, "halve the Newton step (down to 1/8) until the incremental potential "
+                              "decreases: large steps do not gain energy"),
     }
+    #: the step lengths the line search tries, longest first, and the sufficient decrease it asks for
+    ALPHAS = (1.0, 0.5, 0.25, 0.125)
+    ARMIJO = 1e-4
 
     #: CG iterations unrolled into one kernel launch; iterations past convergence inside a chunk are no-ops
     CHUNK = 8
-    _DELTA, _THRESH, _BETA, _ACTIVE, _ITER, _MAXIT, _DELTA0, _RR = range(8)  # slots of self.cg
+    _DELTA, _THRESH, _BETA, _ACTIVE, _ITER, _MAXIT, _DELTA0, _RR, _DECREMENT, _RISE = range(10)  # slots of self.cg
 
     def __init__(self, model, state, forces, **options):
         super().__init__(model, state, forces, **options)
@@ -59,10 +85,15 @@ class Implicit(Integrator):
         self.b = blk.vector(3, fp, P)
         self.inv_diag = blk.vector(3, fp, P)
         self.dv, self.r, self.z, self.p, self.q = (blk.vector(3, fp, P) for _ in range(5))
-        self.cg = blk.scalar(ti.f64, 8)               # CG scalars (see the indices above), kept on the device
-        self.warm = blk.scalar(ti.i32, ())            # 1: start CG from the previous step's dv (Jacobi only)
+        self.x0, self.v0 = blk.vector(3, fp, P), blk.vector(3, fp, P)  # the step's start [m], [m/s]
+        self.dv_total = blk.vector(3, fp, P)          # v_k - v0 [m/s] (after the step: its whole velocity change)
+        self.cg = blk.scalar(ti.f64, 10)              # CG scalars (see the indices above), kept on the device
+        self.warm = blk.scalar(ti.i32, ())            # 1: start CG from the last step's dv_total (Jacobi only)
+        self.ip = blk.scalar(ti.f64, len(self.ALPHAS) + 2)  # IP(alpha = 0), IP(ALPHAS...), grad.dv [J]
+        self.energy = blk.scalar(ti.f64, len(self.ALPHAS) + 2)  # E(alpha = 0), E(ALPHAS...), E at the start [J]
+        self.cut = blk.scalar(ti.i32, ())             # line-search cuts in this step
         blk.finalize(self)
-        self.stats = {"cg_iterations": 0, "cg_unconverged_steps": 0}
+        self.stats = {"cg_iterations": 0, "cg_unconverged_steps": 0, "newton_iterations": 0, "line_search_cuts": 0}
         self.last_residual = 0.0  # sqrt(r.Pr / b.Pb) at the end of the last step
         self.multigrid = None
         # Jacobi-PCG starts from the previous step's dv: it carries over the smooth part Jacobi is slow to find
@@ -73,8 +104,9 @@ class Implicit(Integrator):
         self.reset()
 
     def reset(self) -> None:
-        """Forget the previous step's dv (the warm start)."""
+        """Forget the previous step's velocity change (the warm start)."""
         self.dv.fill(0)
+        self.dv_total.fill(0)
 
     # ------------------------------------------------------------------ the preconditioner
     #: without levels the preconditioner falls back to Jacobi (approx-implicit's multigrid cannot)
@@ -112,28 +144,42 @@ class Implicit(Integrator):
     # ------------------------------------------------------------------ the step
     def _advance(self, dt: float) -> None:
         tol2 = self.options["cg_tolerance"] ** 2
-        self._assemble(dt, tol2, self.options["cg_max_iterations"])
         h_gamma = dt * self.forces.air_damping_value
-        if self.multigrid is None:
-            self._cg_chunk(h_gamma)
-            while self._active():
+        self._begin()
+        its, unconverged, residual, first_decrement = 0, 0, 0.0, None
+        for k in range(self.options["newton_iterations"]):
+            self._assemble(dt, tol2, self.options["cg_max_iterations"], int(k == 0))
+            if self.multigrid is None:
                 self._cg_chunk(h_gamma)
-            cg = self.cg.to_numpy()  # one transfer for all scalars
-            it, delta, delta0 = cg[[self._ITER, self._DELTA, self._DELTA0]]
-        else:
-            mg = self.multigrid
-            mg.prepare(self.state.x, self.model.inv_mass, dt, self.forces.air_damping_value)
-            first = 1
-            while first or self._active():
-                mg.apply(self.r, self.z)
-                self._mg_iteration(h_gamma, tol2, first)
-                first = 0
-            cg = self.cg.to_numpy()
-            it, delta, delta0 = cg[[self._ITER, self._RR, self._DELTA0]]
-        self._integrate(dt)
-        self.last_residual = math.sqrt(max(delta, 0.0) / delta0) if delta0 > 0 else 0.0
-        self.stats["cg_iterations"] += int(it)
-        self.stats["cg_unconverged_steps"] += int(self.last_residual > self.options["cg_tolerance"])
+                while self._active():
+                    self._cg_chunk(h_gamma)
+                slots = [self._ITER, self._DELTA, self._DELTA0, self._DECREMENT, self._RISE]
+            else:
+                mg = self.multigrid
+                mg.prepare(self.state.x, self.model.inv_mass, dt, self.forces.air_damping_value)
+                first = 1
+                while first or self._active():
+                    mg.apply(self.r, self.z)
+                    self._mg_iteration(h_gamma, tol2, first)
+                    first = 0
+                slots = [self._ITER, self._RR, self._DELTA0, self._DECREMENT, self._RISE]
+            self._line_search(dt, int(self.options["line_search"]))
+            it, delta, delta0, decrement, rise = self.cg.to_numpy()[slots]  # one transfer per Newton iteration
+            residual = math.sqrt(max(delta, 0.0) / delta0) if delta0 > 0 else 0.0
+            its += int(it)
+            unconverged += int(residual > self.options["cg_tolerance"])
+            self.stats["newton_iterations"] += 1
+            if first_decrement is None:
+                first_decrement = decrement
+            # enough: the iterate has not gained energy on the step's start (backward Euler only dissipates), or
+            # Newton has converged
+            if rise <= 0.0 or decrement <= self.options["newton_tolerance"] * first_decrement:
+                break
+        self._finish(dt)
+        self.last_residual = residual
+        self.stats["cg_iterations"] += its
+        self.stats["cg_unconverged_steps"] += min(unconverged, 1)
+        self.stats["line_search_cuts"] += int(self.cut[None])
 
     @ti.func
     def _product(self, i, vec: ti.template()):
@@ -148,9 +194,46 @@ class Implicit(Integrator):
         return out
 
     @ti.kernel
-    def _assemble(self, dt: ti.f64, tol2: ti.f64, max_iterations: ti.i32):
+    def _begin(self):
+        """Keep the step's start (x0, v0) and its energy; the last step's velocity change stays in dv_total for the
+        warm start."""
+        m, s = self.model, self.state
+        NA = ti.static(len(self.ALPHAS))
+        grav = ti.cast(self.forces.gravity[None], ti.f64)
+        self.cut[None] = 0
+        self.energy[NA + 1] = 0.0
+        ti.loop_config(serialize=self.model.serial)
+        for i in range(m.n_particles[None]):
+            self.x0[i] = s.x[i]
+            self.v0[i] = s.v[i]
+            if m.inv_mass[i] != 0:
+                mass, v, x = ti.cast(m.mass[i], ti.f64), ti.cast(s.v[i], ti.f64), ti.cast(s.x[i], ti.f64)
+                self.energy[NA + 1] += 0.5 * mass * v.dot(v) - mass * grav.dot(x)
+        ti.loop_config(serialize=self.model.serial)
+        for sp in range(m.n_springs[None]):
+            stretch = ti.cast((s.x[m.spring_b[sp]] - s.x[m.spring_a[sp]]).norm() - m.rest_length[sp], ti.f64)
+            self.energy[NA + 1] += 0.5 * ti.cast(m.stiffness[sp], ti.f64) * stretch * stretch
+
+    @ti.kernel
+    def _assemble(self, dt: ti.f64, tol2: ti.f64, max_iterations: ti.i32, first: ti.i32):
+        """The Newton system at v_k = v0 + dv_total (x_k = x0 + h v_k, written into the state so that the force
+        code evaluates there): spring coefficients, b = S (h f(x_k, v_k) - M dv_total), the Jacobi diagonal, and
+        CG's start (the last step's velocity change for Jacobi on the first iteration, else 0)."""
         m, s, fm = self.model, self.state, self.forces
         h = ti.cast(dt, m.fp)
+        ti.loop_config(serialize=self.model.serial)
+        for i in range(m.n_particles[None]):
+            guess = ti.Vector.zero(m.fp, 3)
+            if first != 0:  # the velocity change of the last step, the first iteration's initial guess
+                guess = self.dv_total[i]
+                self.dv_total[i] = ti.Vector.zero(m.fp, 3)
+            if m.inv_mass[i] != 0:
+                v = self.v0[i] + self.dv_total[i]
+                s.v[i] = v
+                s.x[i] = self.x0[i] + h * v
+                self.dv[i] = self.contact_filter(i, guess) * ti.cast(self.warm[None] * first, m.fp)
+            else:
+                self.dv[i] = ti.Vector.zero(m.fp, 3)
         ti.loop_config(serialize=self.model.serial)
         for sp in range(m.n_springs[None]):
             d = s.x[m.spring_b[sp]] - s.x[m.spring_a[sp]]
@@ -161,30 +244,23 @@ class Implicit(Integrator):
             self.spring_u[sp] = u
             self.spring_axial[sp] = h * m.damping[sp] + h * h * k * (1.0 - g)
             self.spring_iso[sp] = h * h * k * g
+        mass_scale = 1.0 + h * fm.air_damping[None]
         ti.loop_config(serialize=self.model.serial)
         for i in range(m.n_particles[None]):
             zero = ti.Vector.zero(m.fp, 3)
-            # the previous step's dv is the initial guess (filtered by this step's pins and contacts)
-            self.dv[i] = self.contact_filter(i, self.dv[i]) * ti.cast(self.warm[None], m.fp) \
-                if m.inv_mass[i] != 0 else zero
             if m.inv_mass[i] == 0:
                 self.b[i] = zero
             else:
                 f = fm.particle_force(i, True)
-                # h^2 (df/dx) v0 = -h^2 sum_s K_s (v_i - v_j); K_s = (spring_iso + spring_axial_stiff) / h^2
-                kv = ti.Vector.zero(m.fp, 3)
-                diag = ti.Vector.one(m.fp, 3) * m.mass[i] * (1.0 + h * fm.air_damping[None])
+                diag = ti.Vector.one(m.fp, 3) * m.mass[i] * mass_scale
                 for e in range(m.adj_offset[i], m.adj_offset[i + 1]):
                     sp = m.adj_spring[e]
-                    dvel = s.v[i] - s.v[m.adj_other[e]]
                     u = self.spring_u[sp]
-                    axial_k = self.spring_axial[sp] - h * m.damping[sp]
-                    kv += axial_k * u.dot(dvel) * u + self.spring_iso[sp] * dvel
                     diag += self.spring_axial[sp] * u * u + self.spring_iso[sp]
-                self.b[i] = self.contact_filter(i, h * f - kv)
+                self.b[i] = self.contact_filter(i, h * f - m.mass[i] * self.dv_total[i])
                 self.inv_diag[i] = 1.0 / diag
         delta = ti.cast(0.0, ti.f64)
-        mass_scale = 1.0 + h * fm.air_damping[None]
+        bz = ti.cast(0.0, ti.f64)  # b.D^-1 b: the tolerance is relative to b, so that a good start stops early
         ti.loop_config(serialize=self.model.serial)
         for i in range(m.n_particles[None]):
             zero = ti.Vector.zero(m.fp, 3)
@@ -199,13 +275,14 @@ class Implicit(Integrator):
                 z = self.contact_filter(i, r * self.inv_diag[i])
                 self.z[i] = z
                 delta += ti.cast(r.dot(z), ti.f64)
+                bz += ti.cast(self.b[i].dot(self.contact_filter(i, self.b[i] * self.inv_diag[i])), ti.f64)
         self.cg[self._DELTA] = delta
-        self.cg[self._DELTA0] = delta
-        self.cg[self._THRESH] = tol2 * delta
+        self.cg[self._DELTA0] = bz
+        self.cg[self._THRESH] = tol2 * bz
         self.cg[self._ITER] = 0.0
         self.cg[self._BETA] = 0.0
         self.cg[self._MAXIT] = ti.cast(max_iterations, ti.f64)
-        self.cg[self._ACTIVE] = 1.0 if delta > tol2 * delta and max_iterations > 0 else 0.0
+        self.cg[self._ACTIVE] = 1.0 if delta > tol2 * bz and max_iterations > 0 else 0.0
 
     @ti.kernel
     def _cg_chunk(self, h_gamma: ti.f64):
@@ -309,11 +386,93 @@ class Implicit(Integrator):
                 cg[self._ACTIVE] = 0.0
 
     @ti.kernel
-    def _integrate(self, dt: ti.f64):
+    def _line_search(self, dt: ti.f64, search: ti.i32):
+        """dv_total += alpha dv, with alpha the longest of ALPHAS whose incremental potential IP satisfies the
+        sufficient decrease (1 without the search; 1/8 when none does). IP and the total energy E (kinetic + spring +
+        gravity) of every candidate are summed in float64 over the free particles and every spring, with the state
+        still at the iterate (its spring directions, its external forces). Leaves the Newton decrement and the rise
+        of E above the step's start in self.cg."""
+        m, s, fm = self.model, self.state, self.forces
+        A = ti.static(self.ALPHAS)
+        NA = ti.static(len(self.ALPHAS))
+        hh = ti.cast(dt, ti.f64)
+        gamma = ti.cast(fm.air_damping[None], ti.f64)
+        grav = ti.cast(fm.gravity[None], ti.f64)
+        for j in ti.static(range(NA + 2)):
+            self.ip[j] = 0.0
+        for j in ti.static(range(NA + 1)):
+            self.energy[j] = 0.0
+        work = ti.cast(0.0, ti.f64)  # of the external forces over the step [J]
+        ti.loop_config(serialize=self.model.serial)
+        for i in range(m.n_particles[None]):
+            if m.inv_mass[i] != 0:
+                mass = ti.cast(m.mass[i], ti.f64)
+                d = ti.cast(self.dv[i], ti.f64)
+                base = ti.cast(self.dv_total[i], ti.f64)
+                v0 = ti.cast(self.v0[i], ti.f64)
+                x0 = ti.cast(self.x0[i], ti.f64)
+                ext = ti.cast(fm.source_force(i, s.x[i], s.v[i]), ti.f64)
+                self.ip[NA + 1] -= ti.cast(self.b[i], ti.f64).dot(d)  # grad . dv (b = -S grad)
+                work += hh * ext.dot(v0 + base + d)
+                for j in ti.static(range(NA + 1)):
+                    a = 0.0 if j == 0 else A[j - 1]
+                    dvt = base + a * d
+                    v = v0 + dvt
+                    x = x0 + hh * v
+                    self.ip[j] += 0.5 * mass * dvt.dot(dvt) - mass * grav.dot(x) + 0.5 * hh * gamma * mass * v.dot(v) \
+                        - hh * ext.dot(a * d)
+                    self.energy[j] += 0.5 * mass * v.dot(v) - mass * grav.dot(x)
+        ti.loop_config(serialize=self.model.serial)
+        for sp in range(m.n_springs[None]):
+            ia, ib = m.spring_a[sp], m.spring_b[sp]
+            k = ti.cast(m.stiffness[sp], ti.f64)
+            kd = ti.cast(m.damping[sp], ti.f64)
+            L0 = ti.cast(m.rest_length[sp], ti.f64)
+            u = ti.cast(self.spring_u[sp], ti.f64)
+            wa = ti.cast(m.inv_mass[ia] != 0, ti.f64)
+            wb = ti.cast(m.inv_mass[ib] != 0, ti.f64)
+            for j in ti.static(range(NA + 1)):
+                a = 0.0 if j == 0 else A[j - 1]
+                va = ti.cast(self.v0[ia], ti.f64) + wa * ti.cast(self.dv_total[ia] + a * self.dv[ia], ti.f64)
+                vb = ti.cast(self.v0[ib], ti.f64) + wb * ti.cast(self.dv_total[ib] + a * self.dv[ib], ti.f64)
+                xa = ti.cast(self.x0[ia], ti.f64) + wa * hh * va
+                xb = ti.cast(self.x0[ib], ti.f64) + wb * hh * vb
+                stretch = (xb - xa).norm() - L0
+                rel = (vb - va).dot(u)
+                self.ip[j] += 0.5 * k * stretch * stretch + 0.5 * hh * kd * rel * rel
+                self.energy[j] += 0.5 * k * stretch * stretch
+        alpha = ti.cast(A[NA - 1], ti.f64)  # the shortest, when none decreases enough
+        energy = self.energy[NA]
+        for jj in ti.static(range(NA)):
+            j = ti.static(NA - 1 - jj)  # shortest first, so that the longest that decreases enough wins
+            ok = self.ip[j + 1] <= self.ip[0] + self.ARMIJO * A[j] * self.ip[NA + 1]
+            alpha = ti.select(ok, A[j], alpha)
+            energy = ti.select(ok, self.energy[j + 1], energy)
+        if search == 0:
+            alpha = 1.0
+            energy = self.energy[1]
+        if alpha < 1.0:
+            self.cut[None] += 1
+        self.cg[self._DECREMENT] = -self.ip[NA + 1]  # the Newton decrement dv^T A dv [J]
+        # the rise of the total energy above the step's start, beyond the external forces' work and round-off
+        start = self.energy[NA + 1]
+        self.cg[self._RISE] = energy - start - ti.max(work, 0.0) - 1e-9 * ti.abs(start)
+        ti.loop_config(serialize=self.model.serial)
+        for i in range(m.n_particles[None]):
+            if m.inv_mass[i] != 0:
+                self.dv_total[i] += ti.cast(alpha, m.fp) * self.dv[i]
+
+    @ti.kernel
+    def _finish(self, dt: ti.f64):
+        """v = v0 + dv_total, x = x0 + h v (pinned particles keep their start; the pins place the moving ones)."""
         m, s = self.model, self.state
         h = ti.cast(dt, m.fp)
         ti.loop_config(serialize=self.model.serial)
         for i in range(m.n_particles[None]):
+            v = self.v0[i]
+            x = self.x0[i]
             if m.inv_mass[i] != 0:
-                s.v[i] += self.dv[i]
-                s.x[i] += h * s.v[i]
+                v += self.dv_total[i]
+                x += h * v
+            s.v[i] = v
+            s.x[i] = x
