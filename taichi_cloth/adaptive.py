@@ -4,7 +4,7 @@ Desbrun-Gascuel 1996).
 The rule, re-evaluated before every frame (and before every `Scene.step` call):
 
     cap    = clamp(safety x stable step, dt_min, dt_max)
-             stable step: the integrator's damped closed form at the Gershgorin frequency bound
+             stable step: the integrator's damped closed form at the estimated highest frequency
              (stability.stable_dt, the step guard's bound); an unconditionally stable integrator (approx-implicit,
              implicit) has none, so its cap is dt_max: one step per frame by default
     h      = min(cap, motion step, rollback limit)
@@ -19,12 +19,11 @@ joined or merged, Model.set_stiffness / set_mass / pin, a new air drag. They all
 the value) that `AdaptiveStep._model_key` holds, so one identity check per frame notices every one of them; the
 key holds the arrays themselves, so an id cannot be recycled.
 
-safety = 0.8 by default. The Gershgorin bound (the step guard's) is exact for a 1D chain and 1.6-1.8x below
-the measured critical step on the sheets of `python -m taichi_cloth bench stability`, where every explicit
-integrator ran stable at the automatic step over k = 1e1..1e7 N/m and mass ratios 1..1e4. 0.8 keeps a 20 %
-margin where the bound is tight, for what the linear theory leaves out (stretched springs, collision and
-stretch-limit corrections, float32), at 1/0.8 = 1.25x the steps of the bound; the customary C ~ 0.5 would cost
-2x everywhere for a margin the rollback below provides anyway.
+safety = 0.8 by default. The frequency estimate (stability.omega_max_estimate, the step guard's) lies within 1-2 %
+above the exact highest linear frequency (the Gershgorin bound it replaced was 1.4-1.8x above it on cloth sheets).
+0.8 keeps a 20 % margin for what the linear theory leaves out (stretched springs, collision and stretch-limit
+corrections, float32), at 1/0.8 = 1.25x the steps of the bound; the customary C ~ 0.5 would cost 2x everywhere for
+a margin the rollback below provides anyway.
 
 Rollback (`rollback = True`, the default; in Scene.run, while Scene.step raises as before): the clock keeps a copy
 of x and v at the start of every frame (two capacity-sized fields, allocated once). A frame that blows up anyway

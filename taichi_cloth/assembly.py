@@ -19,9 +19,9 @@ from .contacts import Contacts
 from .errors import SceneError
 from .forces import ForceModel
 from .integrators import integrator_class
-from .model import Model, State, omega_max_bound
+from .model import Model, State
 from .pins import Pins, PinSpec, pinned_mask
-from .stability import stable_dt
+from .stability import omega_max_estimate, stable_dt
 from .stretch_limit import StretchLimit
 from .wind import Wind
 
@@ -279,16 +279,16 @@ def _body_morph(options: dict, collide, sewing, dt: float):
 def _check_step(guard: str, stepper, model, forces, clock, source: _Source, specs, refiner, notes: list) -> None:
     """The step guard: an explicit integrator's step against its linear-theory bound on every level the scene may
     run on (warn, refuse with a SceneError, or off)."""
-    if guard == "off":
-        return
     cls, air = type(stepper), forces.air_damping_value
+    if guard == "off" or cls.unconditionally_stable:
+        return
     if refiner is None:
         bound = stable_dt(cls, model, air)
         candidates = [("", clock.step_for(bound) if clock.auto else clock.dt, bound)]
     else:
         candidates = []
         for k, data in enumerate(source.levels):
-            bound = stable_dt(cls, model, air, omega=omega_max_bound(data, pinned_mask(specs, data.positions)))
+            bound = stable_dt(cls, model, air, omega=omega_max_estimate(data, pinned_mask(specs, data.positions)))
             candidates.append((f" on level {k + 1}", clock.step_for(bound) if clock.auto
                                else clock.base * refiner.dt_scale(k), bound))
     for where, dt, bound in candidates:

@@ -13,6 +13,7 @@ from clothbase.fields import FieldBlock
 
 from .cloth import ClothData
 from .runtime import ensure_initialized, serial_loops
+from .stability import omega_max_bound, omega_max_estimate, stiffness_sum
 
 _PRECISIONS = {"f32": ti.f32, "f64": ti.f64}
 
@@ -98,6 +99,7 @@ class Model:
             raise ValueError("every particle needs a positive mass")
         self.data = data
         self.pinned = np.zeros(P, dtype=bool)
+        self._omega = None  # omega_max, estimated on demand
         self.n_particles[None], self.n_springs[None], self.n_triangles[None] = P, S, T
         npfp = self.np_dtype
         _fill(self.rest_x, data.positions.astype(npfp))
@@ -129,6 +131,7 @@ class Model:
         if len(idx) and (idx.min() < 0 or idx.max() >= self.data.n_particles):
             raise ValueError(f"pin index out of range 0..{self.data.n_particles - 1}")
         self.pinned[idx] = True
+        self._omega = None
         inv = np.where(self.pinned, 0.0, 1.0 / self.data.mass)
         _fill(self.inv_mass, inv.astype(self.np_dtype))
 
@@ -139,6 +142,7 @@ class Model:
         k = np.broadcast_to(np.asarray(stiffness, dtype=np.float64), k_old.shape).copy()
         ratio = np.divide(self.data.damping, k_old, out=np.zeros_like(k_old), where=k_old > 0)
         self.data.stiffness, self.data.damping = k, ratio * k
+        self._omega = None
         _fill(self.stiffness, k.astype(self.np_dtype))
         _fill(self.stiffness_sum, self.stiffness_sum_np().astype(self.np_dtype))
         _fill(self.damping, self.data.damping.astype(self.np_dtype))
@@ -149,6 +153,7 @@ class Model:
         if np.any(m <= 0):
             raise ValueError("every particle needs a positive mass")
         self.data.mass = m
+        self._omega = None
         _fill(self.mass, m.astype(self.np_dtype))
         _fill(self.inv_mass, np.where(self.pinned, 0.0, 1.0 / m).astype(self.np_dtype))
 
@@ -171,24 +176,19 @@ class Model:
         over free particles (docs/algorithms.md, step limits). 0 if every particle is pinned."""
         return omega_max_bound(self.data, self.pinned)
 
+    def omega_max(self) -> float:
+        """The highest linear frequency [rad/s] of the free particles at the cloth's positions, estimated from above
+        (stability.omega_max_estimate: within a few per cent); computed again only when the cloth or its pins
+        changed."""
+        if self._omega is None:
+            self._omega = omega_max_estimate(self.data, self.pinned)
+        return self._omega
+
     def damping_ratio_max(self) -> float:
         """max over springs of kd/k [s] (stiffness-proportional damping)."""
         k, kd = self.data.stiffness, self.data.damping
         r = np.divide(kd, k, out=np.zeros_like(k), where=k > 0)
         return float(r.max()) if len(r) else 0.0
-
-
-def stiffness_sum(data: ClothData) -> np.ndarray:
-    """(P,) sum of the spring constants at each particle of `data` [N/m]."""
-    return np.bincount(data.springs.reshape(-1), np.repeat(data.stiffness, 2), minlength=data.n_particles)
-
-
-def omega_max_bound(data: ClothData, pinned: np.ndarray) -> float:
-    """Gershgorin bound [rad/s], sqrt(max_i 2 sum_j k_ij / m_i) over the particles not `pinned` ((P,) bool)."""
-    free = ~np.asarray(pinned, dtype=bool)
-    if not free.any():
-        return 0.0
-    return float(np.sqrt(np.max(2.0 * stiffness_sum(data)[free] / data.mass[free])))
 
 
 def _fill(f, values: np.ndarray) -> None:
