@@ -94,45 +94,52 @@ class PrimitiveColliders(ParticleCollider):
     def _resolve(self):
         ti.loop_config(serialize=self.serial)
         for i in range(self.n_particles[None]):
-            if self.inv_mass[i] != 0:
-                p = ti.cast(self.x_start[i], ti.f32)
-                q = ti.cast(self.x[i], ti.f32)
-                rp = ti.cast(self.thickness, ti.f32)
-                for k in range(self.n_spheres):  # tunnelling first: stop at the entry point
-                    q = self._entry(p, q, self.sphere[k].xyz, self.sphere[k].w + rp)
-                for k in range(self.n_capsules):
-                    a = self.capsule_a[k].xyz
-                    axis = _closest_on_segment(0.5 * (p + q), a, self.capsule_b[k])
-                    q = self._entry(p, q, axis, self.capsule_a[k].w + rp)
-                push = ti.Vector.zero(ti.f32, 3)
-                for k in range(self.n_spheres):  # Zhang et al. 2017: pushes summed over all spheres
-                    c = self.sphere[k].xyz
-                    reach = self.sphere[k].w + rp
-                    d = q - c
-                    dist = d.norm()
-                    if dist <= reach:
-                        push += self.alpha * (reach - dist) * d.normalized(1e-20)
-                for k in range(self.n_capsules):
-                    c = _closest_on_segment(q, self.capsule_a[k].xyz, self.capsule_b[k])
-                    reach = self.capsule_a[k].w + rp
-                    d = q - c
-                    dist = d.norm()
-                    if dist <= reach:
-                        push += self.alpha * (reach - dist) * d.normalized(1e-20)
-                for k in range(self.n_planes):
-                    pt = ti.Vector([self.plane[k][0], self.plane[k][1], self.plane[k][2]])
-                    nrm = ti.Vector([self.plane[k][3], self.plane[k][4], self.plane[k][5]])
-                    dist = (q + push - pt).dot(nrm)
-                    if dist < rp:
-                        push += (rp - dist) * nrm
-                moved = (q + push) - ti.cast(self.x[i], ti.f32)
-                if push.norm() > 0 or moved.norm() > 0:
-                    self.x[i] = ti.cast(q + push, self.x.dtype)
-                    nrm = ti.cast(push.normalized(1e-20), self.x.dtype)
-                    if ti.static(self.records_contacts):
-                        if push.norm() > 0:
-                            self.contact_normal[i] = nrm
-                    self.respond(i, nrm, ti.Vector.zero(self.x.dtype, 3), ti.cast(self.friction, self.x.dtype))
+            self.resolve_particle(i, self.x_start[i])
+
+    @ti.func
+    def resolve_particle(self, i, start):
+        """Particle i, which moved from `start` to x[i] in this step: out of the shapes (entry point first, then the
+        pushes), its velocity answered by `respond`. Touches particle i only, so an integrator may inline it in its
+        own particle loop (the explicit step's fused substeps)."""
+        if self.inv_mass[i] != 0:
+            p = ti.cast(start, ti.f32)
+            q = ti.cast(self.x[i], ti.f32)
+            rp = ti.cast(self.thickness, ti.f32)
+            for k in range(self.n_spheres):  # tunnelling first: stop at the entry point
+                q = self._entry(p, q, self.sphere[k].xyz, self.sphere[k].w + rp)
+            for k in range(self.n_capsules):
+                a = self.capsule_a[k].xyz
+                axis = _closest_on_segment(0.5 * (p + q), a, self.capsule_b[k])
+                q = self._entry(p, q, axis, self.capsule_a[k].w + rp)
+            push = ti.Vector.zero(ti.f32, 3)
+            for k in range(self.n_spheres):  # Zhang et al. 2017: pushes summed over all spheres
+                c = self.sphere[k].xyz
+                reach = self.sphere[k].w + rp
+                d = q - c
+                dist = d.norm()
+                if dist <= reach:
+                    push += self.alpha * (reach - dist) * d.normalized(1e-20)
+            for k in range(self.n_capsules):
+                c = _closest_on_segment(q, self.capsule_a[k].xyz, self.capsule_b[k])
+                reach = self.capsule_a[k].w + rp
+                d = q - c
+                dist = d.norm()
+                if dist <= reach:
+                    push += self.alpha * (reach - dist) * d.normalized(1e-20)
+            for k in range(self.n_planes):
+                pt = ti.Vector([self.plane[k][0], self.plane[k][1], self.plane[k][2]])
+                nrm = ti.Vector([self.plane[k][3], self.plane[k][4], self.plane[k][5]])
+                dist = (q + push - pt).dot(nrm)
+                if dist < rp:
+                    push += (rp - dist) * nrm
+            moved = (q + push) - ti.cast(self.x[i], ti.f32)
+            if push.norm() > 0 or moved.norm() > 0:
+                self.x[i] = ti.cast(q + push, self.x.dtype)
+                nrm = ti.cast(push.normalized(1e-20), self.x.dtype)
+                if ti.static(self.records_contacts):
+                    if push.norm() > 0:
+                        self.contact_normal[i] = nrm
+                self.respond(i, nrm, ti.Vector.zero(self.x.dtype, 3), ti.cast(self.friction, self.x.dtype))
 
     def signed_distance(self, points) -> np.ndarray:
         """Signed distance [m] of points (N,3) to the union of the shapes, negative inside."""

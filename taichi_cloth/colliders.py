@@ -127,6 +127,11 @@ class Colliders(Controller):
         """The force sources of the mesh colliders that push the cloth off from a distance."""
         return [r for r in (getattr(c, "repulsion", None) for c in self.objects) if r is not None]
 
+    def inline_step(self) -> tuple | None:
+        """The primitive colliders (spheres, capsules, planes), whose resolve touches one particle at a time; None
+        when a body mesh or self-collision is among the colliders."""
+        return tuple(self.objects) if all(isinstance(c, PrimitiveColliders) for c in self.objects) else None
+
     def before_step(self, t: float, dt: float) -> None:
         for c in self.objects:
             c.begin_step()

@@ -89,6 +89,18 @@ class Controller:
     changes_topology: bool = False
     stats: Mapping[str, float] = MappingProxyType({})  # a controller with counters sets its own dict
 
+    @property
+    def per_step(self) -> bool:
+        """Whether this controller's before_step/after_step have work in this scene (the scene skips them when
+        not; e.g. pins without a path)."""
+        return True
+
+    def inline_step(self) -> tuple | None:
+        """The per-step work of this controller in a form an integrator can run inside its own particle loop
+        (objects with a @ti.func resolve_particle(i, start), each touching particle i only), or None. When every
+        per-step controller has one, an integrator that fuses substeps runs a frame's steps in few kernel launches."""
+        return None
+
     def before_step(self, t: float, dt: float) -> None:
         """Before an integrator step from time t [s] over dt [s]."""
 

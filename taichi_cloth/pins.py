@@ -183,6 +183,10 @@ class Pins(Controller):
         if self.driver is not None:
             self.driver.apply(t, dt)
 
+    @property
+    def per_step(self) -> bool:
+        return self.driver is not None  # fixed pins are set once, in the inverse masses
+
     def after_step(self, t: float, dt: float) -> None:
         if self.driver is not None:
             self.driver.apply(t, dt)

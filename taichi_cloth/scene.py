@@ -56,11 +56,15 @@ class Scene:
         self._bind_hooks()
 
     def _bind_hooks(self) -> None:
-        # the loop calls only the hooks a controller implements
-        hooks = lambda name: [getattr(c, name) for c in self.controllers if overrides(c, name)]  # noqa: E731
-        self._before_step, self._after_step = hooks("before_step"), hooks("after_step")
-        self._after_frame, self._model_changed = hooks("after_frame"), hooks("model_changed")
-        self._record = hooks("record")
+        # the loop calls only the hooks a controller implements (step hooks only where they have work)
+        hooks = lambda name, cs: [getattr(c, name) for c in cs if overrides(c, name)]  # noqa: E731
+        stepping = [c for c in self.controllers if c.per_step]
+        self._before_step, self._after_step = hooks("before_step", stepping), hooks("after_step", stepping)
+        self._after_frame, self._model_changed = hooks("after_frame", self.controllers), hooks("model_changed", self.controllers)
+        self._record = hooks("record", self.controllers)
+        # substeps fused into the integrator's kernels where nothing between them needs the host
+        inline = [c.inline_step() for c in stepping if overrides(c, "before_step") or overrides(c, "after_step")]
+        self._fused = all(x is not None for x in inline) and self.integrator.fuse(tuple(o for x in inline for o in x))
 
     def add_controller(self, controller) -> None:
         """Add a controller of your own (a taichi_cloth.control.Controller): its hooks run after the scene's own."""
@@ -88,6 +92,12 @@ class Scene:
         return self.clock.frame()[0]
 
     @property
+    def fused(self) -> bool:
+        """Whether the integrator runs a frame's steps in few kernel launches (Integrator.fuse: nothing between
+        the steps needs the host)."""
+        return self._fused
+
+    @property
     def stable_dt(self) -> float | None:
         """The linear-theory stable step [s] of this scene's integrator on the current cloth (None if
         unconditionally stable)."""
@@ -99,6 +109,10 @@ class Scene:
 
     def _advance(self, n: int, dt: float) -> None:
         state, integrator = self.state, self.integrator
+        if self._fused:
+            integrator.advance_fused(n, dt)
+            self.steps_taken += n
+            return
         before, after = self._before_step, self._after_step
         for _ in range(n):
             for hook in before:

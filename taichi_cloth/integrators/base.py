@@ -80,6 +80,15 @@ class Integrator:
     def _advance(self, dt: float) -> None:
         raise NotImplementedError
 
+    def fuse(self, colliders: tuple) -> bool:
+        """Whether this integrator runs several steps per kernel launch (advance_fused) in this scene, with the
+        per-particle resolve of `colliders` inlined; the scene asks when its controllers change. False by default."""
+        return False
+
+    def advance_fused(self, n: int, dt: float) -> None:
+        """n steps of dt [s] in few kernel launches (only after fuse() said yes)."""
+        raise NotImplementedError
+
     def reset(self) -> None:
         """Forget any history (called when the state is reset or overwritten)."""
 
