@@ -12,51 +12,31 @@ import math
 
 import taichi as ti
 
-from .base import Integrator
+from .fused import FusedSteps
 
 
 @ti.data_oriented
-class HistoryIntegrator(Integrator):
-    """The two-level position schemes (Verlet, central difference): the history x - x- is h v."""
+class HistoryIntegrator(FusedSteps):
+    """The two-level position schemes (Verlet, central difference): the history x - x- is h v. Their steps fuse
+    over substeps (integrators.fused); the air drag acts in their update, not in the force pass."""
 
     position_based = True
-
-    def __init__(self, model, state, forces, **options):
-        super().__init__(model, state, forces, **options)
-        self._started = False
-
-    def reset(self) -> None:
-        self._started = False
+    with_drag = False
 
     def topology_changed(self, level: int | None = None) -> None:
         """Nothing to do: the history x - x_prev = h v was prolonged with v."""
 
-    def _advance(self, dt: float) -> None:
-        self._step(dt, self._damping_factor(dt), int(not self._started))
-        self._started = True
-
-    def _damping_factor(self, dt: float) -> float:
-        """The scheme's per-step damping parameter, passed to `displacement` as c."""
-        raise NotImplementedError
-
-    @ti.kernel
-    def _step(self, dt: ti.f64, c_: ti.f64, first: ti.i32):
-        m, s, fm = self.model, self.state, self.forces
-        h = ti.cast(dt, m.fp)
-        c = ti.cast(c_, m.fp)
-        ti.loop_config(serialize=self.model.serial)
-        for i in range(m.n_particles[None]):
-            fm.f[i] = fm.particle_force(i, False)
-        ti.loop_config(serialize=self.model.serial)
-        for i in range(m.n_particles[None]):
-            if m.inv_mass[i] != 0:
-                a = m.inv_mass[i] * fm.f[i]
-                d = h * s.v[i]
-                if first:
-                    d -= 0.5 * h * h * a  # x0 - x(-h) from the Taylor start-up
-                d = self.displacement(d, a, h, c)
-                s.v[i] = d / h
-                s.x[i] += d
+    @ti.func
+    def _update(self, i, h, c, first):
+        m, s = self.model, self.state
+        if m.inv_mass[i] != 0:
+            a = m.inv_mass[i] * self.forces.f[i]
+            d = h * s.v[i]
+            if first:
+                d -= 0.5 * h * h * a  # x0 - x(-h) from the Taylor start-up
+            d = self.displacement(d, a, h, c)
+            s.v[i] = d / h
+            s.x[i] += d
 
 
 @ti.data_oriented
