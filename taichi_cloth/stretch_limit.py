@@ -8,6 +8,11 @@ so a fixed small number of passes does not hold the limit on a soft hanging shee
 17 % strain against a 10 % limit in our test, 100-200 passes reach 10.1 %); the passes therefore repeat until the largest excess
 strain is below `tolerance` or `iterations` passes are done. Velocities get the same correction
 divided by h, so the removed stretching velocity goes too.
+
+The test is made on the device: CHUNK passes run in one launch, each one only while the last left an excess above
+the tolerance, and the host reads one flag per launch (a step that converges in a few passes costs one launch
+and one read, where a read per pass used to stall the step). The pass counters stay on the device until `stats`
+is read.
 """
 import numpy as np
 import taichi as ti
@@ -44,9 +49,19 @@ class StretchLimit(Controller):
         blk = FieldBlock()
         self.limited = blk.scalar(ti.i32, max(model.capacity[1], 1))
         self.dx = blk.vector(3, model.fp, model.capacity[0])
+        self.worst = blk.scalar(ti.f64, ())       # the largest excess strain of the last pass
+        self.counters = blk.scalar(ti.i32, 4)     # active, passes this step, passes in all, unconverged steps
         blk.finalize(self)
-        self.stats = {"stretch_passes": 0, "stretch_unconverged_steps": 0}
         self.refresh()
+
+    #: passes per launch
+    CHUNK = 8
+    _ACTIVE, _PASSES, _TOTAL, _UNCONVERGED = range(4)
+
+    @property
+    def stats(self) -> dict:
+        c = self.counters.to_numpy()
+        return {"stretch_passes": int(c[self._TOTAL]), "stretch_unconverged_steps": int(c[self._UNCONVERGED])}
 
     name = "stretch_limit"
 
@@ -67,43 +82,62 @@ class StretchLimit(Controller):
     def apply(self, dt: float) -> float:
         """Correct positions (and velocities) after a step of dt [s]; returns the largest excess strain
         left before the last pass."""
-        excess = 0.0
-        for k in range(self.iterations):
-            excess = self._project(dt, self.max_strain, self.omega)
-            self.stats["stretch_passes"] += 1
-            if excess <= self.tolerance:
-                return excess
-        self.stats["stretch_unconverged_steps"] += 1
-        return excess
+        first = 1
+        while first or self.counters[self._ACTIVE]:
+            self._passes(dt, self.max_strain, self.omega, self.tolerance, self.iterations, first)
+            first = 0
+        return float(self.worst[None])
 
     @ti.kernel
-    def _project(self, dt: ti.f64, max_strain: ti.f64, omega: ti.f64) -> ti.f64:
+    def _passes(self, dt: ti.f64, max_strain: ti.f64, omega: ti.f64, tolerance: ti.f64, iterations: ti.i32,
+                first: ti.i32):
         m, s = self.model, self.state
+        c = ti.static(self.counters)
         h = ti.cast(dt, m.fp)
         limit = 1.0 + ti.cast(max_strain, m.fp)
         w = ti.cast(omega, m.fp)
-        worst = ti.cast(0.0, ti.f64)
-        ti.loop_config(serialize=self.model.serial)
-        for i in range(m.n_particles[None]):
-            acc = ti.Vector.zero(m.fp, 3)
-            count = 0
-            wi = m.inv_mass[i]
-            if wi != 0:
-                for e in range(m.adj_offset[i], m.adj_offset[i + 1]):
-                    sp = m.adj_spring[e]
-                    if self.limited[sp]:
-                        j = m.adj_other[e]
-                        d = s.x[j] - s.x[i]
-                        l = d.norm()
-                        L0 = m.rest_length[sp]
-                        lmax = limit * L0
-                        if l > lmax and L0 > 0:
-                            ti.atomic_max(worst, ti.cast(l / L0 - limit, ti.f64))
-                            acc += wi / (wi + m.inv_mass[j]) * (l - lmax) / l * d
-                            count += 1
-            self.dx[i] = w * acc / ti.max(count, 1)
-        ti.loop_config(serialize=self.model.serial)
-        for i in range(m.n_particles[None]):
-            s.x[i] += self.dx[i]
-            s.v[i] += self.dx[i] / h
-        return worst
+        if first != 0:
+            c[self._ACTIVE] = 1
+            c[self._PASSES] = 0
+        for _ in ti.static(range(self.CHUNK)):  # unrolled: every pass stays a top-level loop
+            if c[self._ACTIVE] != 0:
+                self.worst[None] = 0.0
+            ti.loop_config(serialize=self.model.serial)
+            for i in range(m.n_particles[None]):
+                if c[self._ACTIVE] != 0:
+                    self._correction(i, limit, w)
+            ti.loop_config(serialize=self.model.serial)
+            for i in range(m.n_particles[None]):
+                if c[self._ACTIVE] != 0:
+                    s.x[i] += self.dx[i]
+                    s.v[i] += self.dx[i] / h
+            if c[self._ACTIVE] != 0:
+                c[self._PASSES] += 1
+                c[self._TOTAL] += 1
+                if self.worst[None] <= tolerance:
+                    c[self._ACTIVE] = 0
+                elif c[self._PASSES] >= iterations:
+                    c[self._ACTIVE] = 0
+                    c[self._UNCONVERGED] += 1
+
+    @ti.func
+    def _correction(self, i, limit, w):
+        """dx[i]: omega times the average of particle i's corrections over its over-stretched limited springs."""
+        m, s = self.model, self.state
+        acc = ti.Vector.zero(m.fp, 3)
+        count = 0
+        wi = m.inv_mass[i]
+        if wi != 0:
+            for e in range(m.adj_offset[i], m.adj_offset[i + 1]):
+                sp = m.adj_spring[e]
+                if self.limited[sp]:
+                    j = m.adj_other[e]
+                    d = s.x[j] - s.x[i]
+                    l = d.norm()
+                    L0 = m.rest_length[sp]
+                    lmax = limit * L0
+                    if l > lmax and L0 > 0:
+                        ti.atomic_max(self.worst[None], ti.cast(l / L0 - limit, ti.f64))
+                        acc += wi / (wi + m.inv_mass[j]) * (l - lmax) / l * d
+                        count += 1
+        self.dx[i] = w * acc / ti.max(count, 1)

@@ -268,13 +268,17 @@ def test_fixed_points_hold_while_the_rest_falls():
     spec.fixed = [FixedPoint("A", (0.001, 0.199))]  # a point in the pattern picks its nearest particle
     assert build_garment(spec).fixed.tolist() == g.fixed.tolist()
     scene = tc.Scene(g, integrator="implicit", dt=1 / 240, sewing=dict(gravity=True))
-    scene.run(30, progress=False)
-    x = scene.positions()
     sewing = scene.controller("sewing")
-    np.testing.assert_allclose(x[sewing.current_of[g.fixed]], held, atol=1e-6)
     com0 = (g.data.mass * g.data.positions[:, 1]).sum() / g.data.mass.sum()
-    com = (scene.model.data.mass * x[:, 1]).sum() / scene.model.data.mass.sum()
-    assert com < com0 - 0.01  # everything else sagged under gravity (on while sewing here)
+    coms = []
+    for _ in range(6):
+        scene.run(5, progress=False)
+        x = scene.positions()
+        np.testing.assert_allclose(x[sewing.current_of[g.fixed]], held, atol=1e-6)
+        coms.append((scene.model.data.mass * x[:, 1]).sum() / scene.model.data.mass.sum())
+    # everything else sagged under gravity (on while sewing here): by 0.14 m at frame 20; then the closing seams
+    # swing the hanging square up (a run at a tenth of the step does the same)
+    assert min(coms) < com0 - 0.1, coms
 
 
 def test_recording_has_the_strain_map_seam_gap_and_merge(tmp_path):
