@@ -42,3 +42,16 @@ def refine(scene) -> None:
 def current_level(scene) -> int:
     """The current 4-8 level (0-based) of a multilevel scene."""
     return scene.controller("refiner").level
+
+
+def spring_forces(d, x, v):
+    """numpy spring forces with damping, (P,3)."""
+    a, b = d.springs[:, 0], d.springs[:, 1]
+    diff = x[b] - x[a]
+    length = np.linalg.norm(diff, axis=1)
+    u = diff / length[:, None]
+    mag = d.stiffness * (length - d.rest_length) + d.damping * np.einsum("si,si->s", v[b] - v[a], u)
+    f = np.zeros_like(x)
+    np.add.at(f, a, mag[:, None] * u)
+    np.add.at(f, b, -mag[:, None] * u)
+    return f, u

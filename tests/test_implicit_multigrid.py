@@ -4,11 +4,10 @@ and with contacts; it equals the Jacobi-preconditioned step; a V-cycle is the sy
 picks the preconditioner the cloth allows and says which."""
 import numpy as np
 import pytest
-import scipy.sparse.linalg as spla
 import taichi as ti
 
 import taichi_cloth as tc
-from conftest import current_level
+from conftest import current_level, spring_forces
 from taichi_cloth.multilevel_cloth import multilevel_grid
 from taichi_cloth.stability import stiffness_matrix
 
@@ -36,14 +35,8 @@ def filtered_solve(sc) -> np.ndarray:
     from the formulas, not from the engine's kernels."""
     d = sc.model.data
     x, v = sc.positions(), sc.velocities()
-    a, b = d.springs[:, 0], d.springs[:, 1]
-    diff = x[b] - x[a]
-    length = np.linalg.norm(diff, axis=1)
-    u = diff / length[:, None]
-    mag = d.stiffness * (length - d.rest_length) + d.damping * np.einsum("si,si->s", v[b] - v[a], u)
-    f = np.zeros_like(x)
-    np.add.at(f, a, mag[:, None] * u)
-    np.add.at(f, b, -mag[:, None] * u)
+    f, _ = spring_forces(d, x, v)
+    length = np.linalg.norm(x[d.springs[:, 1]] - x[d.springs[:, 0]], axis=1)
     f += d.mass[:, None] * np.array([0.0, -9.81, 0.0]) - GAMMA * d.mass[:, None] * v
     K = stiffness_matrix(x, d.springs, d.stiffness, d.rest_length)
     D = stiffness_matrix(x, d.springs, d.damping, length)  # rest = current length: only the kd u u^T term

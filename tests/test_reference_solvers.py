@@ -5,6 +5,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 import taichi_cloth as tc
+from conftest import spring_forces
 from taichi_cloth.stability import stiffness_matrix
 
 
@@ -19,19 +20,6 @@ def deformed_scene(integrator, **opts):
     v[42] = 0
     sc.state.set(x=x, v=v)
     return sc, x, v
-
-
-def spring_forces(d, x, v):
-    """numpy spring forces with damping, (P,3)."""
-    a, b = d.springs[:, 0], d.springs[:, 1]
-    diff = x[b] - x[a]
-    length = np.linalg.norm(diff, axis=1)
-    u = diff / length[:, None]
-    mag = d.stiffness * (length - d.rest_length) + d.damping * np.einsum("si,si->s", v[b] - v[a], u)
-    f = np.zeros_like(x)
-    np.add.at(f, a, mag[:, None] * u)
-    np.add.at(f, b, -mag[:, None] * u)
-    return f, u
 
 
 def test_implicit_first_newton_iteration_solves_the_baraff_witkin_system():
