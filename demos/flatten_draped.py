@@ -19,8 +19,8 @@ from taichi_cloth.flatten import flatten_pieces, plot_flat, write_flat_dxf
 from taichi_cloth.garment.metrics import draped_pieces, garment_quality
 
 #: Fan et al. 1998 table 1, 3D -> 2D, per piece of a six-piece child's garment [%]
-SEED_AREA = (0.025, 1.18)
-SEED_BOUNDARY = (0.756, 1.72)
+PAPER_AREA = (0.025, 1.18)
+PAPER_BOUNDARY = (0.756, 1.72)
 
 
 def main(argv=None) -> int:
@@ -53,8 +53,8 @@ def main(argv=None) -> int:
         print(f"| {f.name} | {100 * q.area_error:.2f} % | {100 * q.boundary_error:.2f} % | {100 * f.area_error:.3f} % "
               f"| {100 * f.boundary_error:.3f} % | {100 * np.abs(f.edge_error).max():.2f} % | {f.flipped} "
               f"| {f.iterations} | {100 * (f.area_2d / pattern_area - 1):+.2f} % | {1e3 * rms:.1f} mm |")
-    print(f"Fan et al. 1998 (3D->2D, six pieces): area {SEED_AREA[0]}-{SEED_AREA[1]} %, boundary "
-          f"{SEED_BOUNDARY[0]}-{SEED_BOUNDARY[1]} %")
+    print(f"Fan et al. 1998 (3D->2D, six pieces): area {PAPER_AREA[0]}-{PAPER_AREA[1]} %, boundary "
+          f"{PAPER_BOUNDARY[0]}-{PAPER_BOUNDARY[1]} %")
     dxf = write_flat_dxf(flat, rec.path.with_suffix(".dxf"))
     png = plot_flat(flat, rec.path.with_suffix(".png"), references=[uv[f.boundary] for f, uv in zip(flat, patterns)],
                     layouts=layouts)

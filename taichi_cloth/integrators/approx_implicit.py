@@ -44,7 +44,7 @@ class ApproxImplicit(Integrator):
     name = "approx-implicit"
     unconditionally_stable = True
     OPTIONS = {
-        "sweeps": Option(int, 2, "Jacobi sweeps per step (seed: 2)", at_least_one),
+        "sweeps": Option(int, 2, "Jacobi sweeps per step (2 is the published form)", at_least_one),
         "warm_start": Option(bool, False, "start the sweeps from the previous step's dv instead of 0"),
         "jv_term": Option(bool, False, "include the h J~ v term in the right-hand side (needed for sweeps > 2)"),
         "multigrid_cycles": Option(int, 0, "V-cycle-preconditioned CG iterations per step over the 4-8 levels "
