@@ -79,14 +79,13 @@ class StretchLimit(Controller):
         buf[: len(flags)] = flags
         self.limited.from_numpy(buf)
 
-    def apply(self, dt: float) -> float:
-        """Correct positions (and velocities) after a step of dt [s]; returns the largest excess strain
-        left before the last pass."""
+    def apply(self, dt: float) -> None:
+        """Correct positions (and velocities) after a step of dt [s]. The largest excess strain left before the last
+        pass stays in `worst` on the device (reading it would stall the step)."""
         first = 1
         while first or self.counters[self._ACTIVE]:
             self._passes(dt, self.max_strain, self.omega, self.tolerance, self.iterations, first)
             first = 0
-        return float(self.worst[None])
 
     @ti.kernel
     def _passes(self, dt: ti.f64, max_strain: ti.f64, omega: ti.f64, tolerance: ti.f64, iterations: ti.i32,

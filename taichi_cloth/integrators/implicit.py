@@ -196,6 +196,16 @@ class Implicit(Integrator):
             out += self.spring_axial[sp] * u.dot(dq) * u + self.spring_iso[sp] * dq
         return out
 
+    @ti.func
+    def _system_product(self, i, mass_scale, active):
+        """q[i] = (S A p)_i (0 for a pinned particle or once CG stopped); returns p[i].q[i] in float64."""
+        m = self.model
+        q = ti.Vector.zero(m.fp, 3)
+        if m.inv_mass[i] != 0 and active != 0:
+            q = self.contact_filter(i, m.mass[i] * mass_scale * self.p[i] + self._product(i, self.p))
+        self.q[i] = q
+        return ti.cast(self.p[i].dot(q), ti.f64)
+
     @ti.kernel
     def _begin(self):
         """Keep the step's start (x0, v0) and its energy; the last step's velocity change stays in dv_total for the
@@ -311,11 +321,7 @@ class Implicit(Integrator):
             pq = ti.cast(0.0, ti.f64)
             ti.loop_config(serialize=self.model.serial)
             for i in range(m.n_particles[None]):
-                q = ti.Vector.zero(m.fp, 3)
-                if m.inv_mass[i] != 0 and cg[self._ACTIVE] != 0:
-                    q = self.contact_filter(i, m.mass[i] * mass_scale * self.p[i] + self._product(i, self.p))
-                self.q[i] = q
-                pq += ti.cast(self.p[i].dot(q), ti.f64)
+                pq += self._system_product(i, mass_scale, cg[self._ACTIVE])
             alpha = ti.cast(0.0, ti.f64)
             if cg[self._ACTIVE] != 0 and pq > 0:
                 alpha = cg[self._DELTA] / pq
@@ -376,11 +382,7 @@ class Implicit(Integrator):
         pq = ti.cast(0.0, ti.f64)
         ti.loop_config(serialize=self.model.serial)
         for i in range(m.n_particles[None]):
-            q = ti.Vector.zero(m.fp, 3)
-            if m.inv_mass[i] != 0 and cg[self._ACTIVE] != 0:
-                q = self.contact_filter(i, m.mass[i] * mass_scale * self.p[i] + self._product(i, self.p))
-            self.q[i] = q
-            pq += ti.cast(self.p[i].dot(q), ti.f64)
+            pq += self._system_product(i, mass_scale, cg[self._ACTIVE])
         alpha = ti.cast(0.0, ti.f64)
         if cg[self._ACTIVE] != 0 and pq > 0:
             alpha = rz / pq
