@@ -17,8 +17,10 @@ $(VENV)/.installed: pyproject.toml
 demo: $(VENV)/.installed
 	$(PY) demos/sew_tshirt.py --out $(OUT)
 
+# two workers, one test file each at a time (a file's scenes share its module fixtures); TEST_WORKERS=0 runs serially
+TEST_WORKERS ?= 2
 test: $(VENV)/.installed
-	$(PY) -m pytest
+	$(PY) -m pytest -n $(TEST_WORKERS) --dist loadfile
 
 bench: $(VENV)/.installed
 	$(PY) -m taichi_cloth bench --out $(OUT)/bench

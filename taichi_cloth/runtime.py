@@ -67,14 +67,9 @@ def ensure_initialized() -> None:
         init("cpu")
 
 
-def _compiled_instances() -> dict[str, int]:
-    counts: dict[str, int] = {}
-    for kernel in impl.get_runtime().kernels:
-        n = len(kernel.compiled_kernels)
-        if n:
-            name = kernel.func.__qualname__
-            counts[name] = counts.get(name, 0) + n
-    return counts
+def _compiled_keys() -> dict:
+    """{kernel: set of the template instances compiled so far} (a flush of retired field trees clears them all)."""
+    return {kernel: set(kernel.compiled_kernels) for kernel in impl.get_runtime().kernels if kernel.compiled_kernels}
 
 
 class CompileCounter:
@@ -86,13 +81,19 @@ class CompileCounter:
     """
 
     def __enter__(self) -> "CompileCounter":
-        self._before = _compiled_instances()
+        self._before = _compiled_keys()
         self.compiled: dict[str, int] = {}
         return self
 
     def __exit__(self, *exc) -> None:
-        after = _compiled_instances()
-        self.compiled = {k: n - self._before.get(k, 0) for k, n in after.items() if n > self._before.get(k, 0)}
+        # instances present now that were not before: a count difference would miss the ones compiled after a
+        # flush of retired field trees inside the block (the flush drops every compiled kernel)
+        self.compiled = {}
+        for kernel, keys in _compiled_keys().items():
+            new = len(keys - self._before.get(kernel, set()))
+            if new:
+                name = kernel.func.__qualname__
+                self.compiled[name] = self.compiled.get(name, 0) + new
 
     @property
     def total(self) -> int:

@@ -1,4 +1,5 @@
 """One Taichi runtime (ti.cpu) for the whole session: re-initialising frees fields and costs seconds."""
+import os
 import warnings
 
 import numpy as np
@@ -9,7 +10,13 @@ import taichi_cloth as tc
 
 @pytest.fixture(scope="session", autouse=True)
 def taichi_cpu():
-    tc.init("cpu")
+    options = {}
+    worker = os.environ.get("PYTEST_XDIST_WORKER")  # `make test` runs the files on two workers (pytest-xdist)
+    if worker:
+        # one offline kernel cache per worker: two processes writing one cache fight over its lock
+        base = os.environ.get("TI_OFFLINE_CACHE_FILE_PATH", os.path.expanduser("~/.cache/taichi/ticache"))
+        options["offline_cache_file_path"] = f"{base}-{worker}"
+    tc.init("cpu", **options)
     yield
 
 

@@ -46,6 +46,7 @@ import math
 
 import taichi as ti
 
+from clothbase.errors import warn
 from clothbase.fields import FieldBlock
 
 from .base import Integrator, Option, at_least_one, one_of, positive
@@ -59,7 +60,8 @@ class Implicit(Integrator):
     unconditionally_stable = True
     OPTIONS = {
         "cg_tolerance": Option(float, 1e-3, "relative CG residual (preconditioned norm) to stop at", positive),
-        "cg_max_iterations": Option(int, 200, "CG iteration cap per step", at_least_one),
+        "cg_max_iterations": Option(int, 200, "CG iteration cap per step, shared by its Newton iterations",
+                                    at_least_one),
         "preconditioner": Option(str, "auto", "jacobi | multigrid (V-cycles over the cloth's nested 4-8 levels) | "
                                  "auto (multigrid where the cloth has them)", one_of(PRECONDITIONERS)),
         "newton_iterations": Option(int, 4, "the most Newton iterations per step (each one CG solve and a line "
@@ -98,6 +100,7 @@ class Implicit(Integrator):
         blk.finalize(self)
         self.stats = {"cg_iterations": 0, "cg_unconverged_steps": 0, "newton_iterations": 0, "line_search_cuts": 0}
         self.last_residual = 0.0  # sqrt(r.Pr / b.Pb) at the end of the last step
+        self._warned_cap = False
         self.multigrid = None
         # Jacobi-PCG starts from the previous step's dv: it carries over the smooth part Jacobi is slow to find
         # (measured on a 65 x 65 cotton sheet held by one edge at 1/60 s: 43 mm RMS from the exact step's
@@ -150,8 +153,9 @@ class Implicit(Integrator):
         h_gamma = dt * self.forces.air_damping_value
         self._begin()
         its, unconverged, residual, first_decrement = 0, 0, 0.0, None
+        budget = self.options["cg_max_iterations"]  # per step: a further Newton iteration spends what is left
         for k in range(self.options["newton_iterations"]):
-            self._assemble(dt, tol2, self.options["cg_max_iterations"], int(k == 0))
+            self._assemble(dt, tol2, budget - its, int(k == 0))
             if self.multigrid is None:
                 self._cg_chunk(h_gamma)
                 while self._active():
@@ -174,11 +178,16 @@ class Implicit(Integrator):
             self.stats["newton_iterations"] += 1
             if first_decrement is None:
                 first_decrement = decrement
-            # enough: the iterate has not gained energy on the step's start (backward Euler only dissipates), or
-            # Newton has converged
-            if rise <= 0.0 or decrement <= self.options["newton_tolerance"] * first_decrement:
+            # enough: the iterate has not gained energy on the step's start (backward Euler only dissipates), Newton
+            # has converged, or the step's CG budget is spent
+            if rise <= 0.0 or decrement <= self.options["newton_tolerance"] * first_decrement or its >= budget:
                 break
         self._finish(dt)
+        if rise > 0.0 and its >= budget and not self._warned_cap:
+            self._warned_cap = True  # backward Euler only dissipates: say it once when the cap lets a step gain energy
+            warn(f"implicit: CG stopped at its cap of {budget} iterations (relative residual {residual:.2g}) and the "
+                 f"step gained {rise:.3g} J; raise cg_max_iterations"
+                 + ("" if self.multigrid is not None else " or use a multilevel cloth (multigrid preconditioner)"))
         self.last_residual = residual
         self.stats["cg_iterations"] += its
         self.stats["cg_unconverged_steps"] += min(unconverged, 1)
