@@ -6,8 +6,9 @@ CPU a parallel loop costs 60-90 us to dispatch whatever its size (measured on a 
 parallel loop 55-90 us, a serial pass over 20,000 vertices 4 us), so below `parallel_from` particles serial loops
 are faster. Where a pass does real work per particle the second core wins from a few thousand particles (bench
 integrators, 2 cores: at 128x128 an implicit step took 200 ms serial and 130 ms parallel, an explicit one 1.8 and
-1.1 ms; at 64x64 the explicit step 0.55 and 0.39 ms, the implicit one the same), hence 4096; set it with `init(..., parallel_from=n)` or the environment variable TAICHI_CLOTH_PARALLEL_FROM. A GPU
-runs every loop in parallel.
+1.1 ms; at 64x64 the explicit step 0.55 and 0.39 ms, the implicit one the same), hence 4096; set it with
+`init(..., parallel_from=n)` or the environment variable TAICHI_CLOTH_PARALLEL_FROM. A GPU runs every loop in
+parallel.
 `CompileCounter` counts kernel compilations so tests can show that a scene compiles only what it
 names and that changing a parameter never recompiles.
 """

@@ -1,7 +1,8 @@
 """ms per step and real-time factor of every integrator (`python -m taichi_cloth bench [integrators]`).
 
 On square grids: ms per step, compile time, and wall time per simulated second of a hanging cloth at each
-integrator's largest stable step.
+integrator's largest stable step; and the implicit integrator with its multigrid preconditioner on the same sheet
+built as a 4-8 hierarchy ((n+1) x (n+1) particles, on its finest level), where n allows one.
 
 "Largest stable step": 0.9 x the linear-theory bound for the explicit family (docs/algorithms.md, step limits);
 1/60 s (one step per displayed frame) for the unconditionally stable ones. Times are wall clock after a
@@ -22,6 +23,8 @@ def add_arguments(p) -> None:
     p.add_argument("--integrators", nargs="+", default=None, help="integrators to time (default: all five)")
     p.add_argument("--steps", type=int, default=20, help="steps per timed block (5 blocks, median reported)")
     p.add_argument("--material", default="cotton", help="material preset")
+    p.add_argument("--no-multigrid", action="store_true",
+                   help="skip the rows of the implicit integrator with its multigrid preconditioner (on a 4-8 grid)")
     p.add_argument("--arch", default="cpu", choices=("cpu", "gpu"))
     p.add_argument("--out", default="out/bench", help="folder for bench.csv, bench.md, bench.png")
 
@@ -39,6 +42,32 @@ def hanging_cloth(n: int, integrator: str, material: str = "cotton", dt: float |
     if dt is None and scene.stable_dt is not None:
         scene.dt = 0.9 * scene.stable_dt  # the largest step the theory keeps stable, with a margin
     return scene
+
+
+def multigrid_cloth(n: int, material: str = "cotton"):
+    """The benchmark sheet as a 4-8 hierarchy on its finest level, (n+1) x (n+1) particles, for the implicit
+    integrator's multigrid preconditioner; None when n is not 2, 3 or 4 times a power of 2 (from 8 cells)."""
+    from ..multilevel_cloth import multilevel_grid
+
+    for base in (4, 3, 2):
+        j = (n // base).bit_length() - 1
+        if n % base == 0 and n // base == 1 << j and 2 * j + 1 <= 12 and j >= 1:
+            return multilevel_grid((1.0, 1.0), (base, base), 2 * j + 1, material, center=(0.0, 1.0, 0.0),
+                                   plane="xy", start_level=2 * j)
+    return None
+
+
+def hanging_multigrid(n: int, material: str = "cotton"):
+    """hanging_cloth's scene on multigrid_cloth(n) (pinned at its two top corners, h = 1/60 s), or None."""
+    from ..scene import Scene
+
+    cloth = multigrid_cloth(n, material)
+    if cloth is None:
+        return None
+    return Scene(cloth, name=f"bench_implicit_multigrid_{n}", integrator="implicit", dt=FRAME_DT,
+                 integrator_options={"preconditioner": "multigrid"}, multilevel={"refine": False},
+                 pins=[{"box": ((sx - 0.01, 1.49, -0.01), (sx + 0.01, 1.51, 0.01))} for sx in (-0.5, 0.5)],
+                 air_damping=0.2, step_guard="off")
 
 
 def time_scene(scene, steps: int, blocks: int = 5) -> dict:
@@ -108,6 +137,12 @@ def run(args) -> int:
                 record_ms = time_recorder(scene, out)
             rows.append({"integrator": name, "n": n, "particles": n * n, "springs": scene.model.data.n_springs,
                          **r, "record_ms_per_frame": record_ms})
+            print(_row_text(rows[-1]), flush=True)
+        scene = None if args.no_multigrid or "implicit" not in names else hanging_multigrid(n, args.material)
+        if scene is not None:
+            rows.append({"integrator": "implicit multigrid", "n": n + 1, "particles": scene.model.data.n_particles,
+                         "springs": scene.model.data.n_springs, **time_scene(scene, args.steps),
+                         "record_ms_per_frame": record_ms})
             print(_row_text(rows[-1]), flush=True)
     _write(rows, out, args)
     return 0

@@ -39,7 +39,8 @@ Preconditioners (option `preconditioner`):
   auto       (the default) multigrid where the cloth has nested 4-8 levels (a [multilevel] grid with global
              refinement), jacobi elsewhere. The run summary names the one used.
 CG stops when sqrt(r.z / b.z_b) <= cg_tolerance (z = the preconditioned residual: D^-1 r, or the V-cycle's; z_b the
-preconditioned b, so that a warm start that begins close stops early) or after cg_max_iterations. (A test on |r| alone stopped multigrid-CG at bad points: twice the error at a tolerance of 0.1.)
+preconditioned b, so that a warm start that begins close stops early) or after cg_max_iterations. (A test on |r|
+alone stopped multigrid-CG at bad points: twice the error at a tolerance of 0.1.)
 """
 
 import math
@@ -263,9 +264,9 @@ class Implicit(Integrator):
         ti.loop_config(serialize=self.model.serial)
         for sp in range(m.n_springs[None]):
             d = s.x[m.spring_b[sp]] - s.x[m.spring_a[sp]]
-            l = d.norm()
-            u = d / ti.max(l, 1e-12)
-            g = ti.max(0.0, 1.0 - m.rest_length[sp] / ti.max(l, 1e-12))
+            length = ti.max(d.norm(), 1e-12)
+            u = d / length
+            g = ti.max(0.0, 1.0 - m.rest_length[sp] / length)
             k = m.stiffness[sp]
             self.spring_u[sp] = u
             self.spring_axial[sp] = h * m.damping[sp] + h * h * k * (1.0 - g)
