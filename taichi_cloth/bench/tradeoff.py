@@ -46,7 +46,6 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import SceneError
 from .accuracy import Trajectory, compare, pareto_front, run_sampled, sample_errors
 
 #: integrator variants: label -> (integrator, options). The approx-implicit variants are docs/algorithms.md, approximate implicit variants's.
@@ -280,10 +279,10 @@ def run_study(scene_names, variants, levels_below=(0, 1, 2), base: int = 4, n_le
             if sk not in scenes:  # one scene per variant and level: dt changes compile nothing
                 try:
                     scenes = {sk: spec.build(base, cfg.level, cfg.variant, DT_LADDER[0])}
-                except SceneError as err:  # a combination the engine refuses (e.g. approx-implicit multigrid + colliders)
+                except ValueError as err:  # a combination the engine refuses (approx-implicit multigrid + colliders)
                     scenes = {sk: err}
             scene = scenes[sk]
-            if isinstance(scene, SceneError):
+            if isinstance(scene, ValueError):
                 study.rows.append({"scene": name, "variant": cfg.variant, "level": cfg.level + 1, "particles": None,
                                    "step": cfg.step_label, "dt": cfg.dt, "wall_per_sim_s": math.nan,
                                    "rms_error": math.nan, "stable": False, "status": f"refused: {scene}",

@@ -158,21 +158,20 @@ class Implicit(Integrator):
         for k in range(self.options["newton_iterations"]):
             self._assemble(dt, tol2, budget - its, int(k == 0))
             if self.multigrid is None:
-                self._cg_chunk(h_gamma)
-                while self._active():
-                    self._cg_chunk(h_gamma)
-                slots = [self._ITER, self._DELTA, self._DELTA0, self._DECREMENT, self._RISE]
+                while self._cg_chunk(h_gamma):
+                    pass
             else:
                 mg = self.multigrid
                 mg.prepare(self.state.x, self.model.inv_mass, dt, self.forces.air_damping_value)
                 first = 1
-                while first or self._active():
+                while True:
                     mg.apply(self.r, self.z)
-                    self._mg_iteration(h_gamma, tol2, first)
+                    if not self._mg_iteration(h_gamma, tol2, first):
+                        break
                     first = 0
-                slots = [self._ITER, self._RR, self._DELTA0, self._DECREMENT, self._RISE]
-            self._line_search(dt, int(self.options["line_search"]))
-            it, delta, delta0, decrement, rise = self.cg.to_numpy()[slots]  # one transfer per Newton iteration
+            # the line search returns what the host needs of this iteration: one read per Newton iteration
+            it, delta, delta0, decrement, rise = self._line_search(dt, int(self.options["line_search"]),
+                                                                   int(self.multigrid is not None))
             residual = math.sqrt(max(delta, 0.0) / delta0) if delta0 > 0 else 0.0
             its += int(it)
             unconverged += int(residual > self.options["cg_tolerance"])
@@ -316,9 +315,10 @@ class Implicit(Integrator):
         self.cg[self._ACTIVE] = 1.0 if delta > tol2 * bz and max_iterations > 0 else 0.0
 
     @ti.kernel
-    def _cg_chunk(self, h_gamma: ti.f64):
-        """CHUNK preconditioned CG iterations (BW98 modified PCG with the pinned rows filtered out).
-        Scalars live in self.cg; once converged (or at the cap) the remaining iterations change nothing."""
+    def _cg_chunk(self, h_gamma: ti.f64) -> ti.i32:
+        """CHUNK preconditioned CG iterations (BW98 modified PCG with the pinned rows filtered out); returns whether
+        CG is still iterating. Scalars live in self.cg; once converged (or at the cap) the remaining iterations
+        change nothing."""
         m = self.model
         cg = ti.static(self.cg)
         mass_scale = 1.0 + ti.cast(h_gamma, m.fp)
@@ -352,17 +352,13 @@ class Implicit(Integrator):
                 cg[self._DELTA] = delta_new
                 if delta_new <= cg[self._THRESH] or cg[self._ITER] >= cg[self._MAXIT] or pq <= 0:
                     cg[self._ACTIVE] = 0.0
+        return ti.cast(cg[self._ACTIVE] != 0, ti.i32)
 
     @ti.kernel
-    def _active(self) -> ti.i32:
-        """Whether the CG on the device is still iterating (a scalar read, cheaper than a field transfer)."""
-        return ti.cast(self.cg[self._ACTIVE] != 0, ti.i32)
-
-    @ti.kernel
-    def _mg_iteration(self, h_gamma: ti.f64, tol2: ti.f64, first: ti.i32):
+    def _mg_iteration(self, h_gamma: ti.f64, tol2: ti.f64, first: ti.i32) -> ti.i32:
         """One CG iteration after the V-cycle wrote z = V(r): z = S z and the convergence test on r.z (it stops
         before any update: the V-cycle is the measure), then p = z + beta p, q = S A p, dv and r. Scalars stay in
-        self.cg."""
+        self.cg; returns whether CG goes on (0: this call found it converged or at its cap, and changed nothing)."""
         m = self.model
         cg = ti.static(self.cg)
         mass_scale = 1.0 + ti.cast(h_gamma, m.fp)
@@ -407,14 +403,16 @@ class Implicit(Integrator):
             cg[self._DELTA] = rz
             if pq <= 0:
                 cg[self._ACTIVE] = 0.0
+        return ti.cast(cg[self._ACTIVE] != 0, ti.i32)
 
     @ti.kernel
-    def _line_search(self, dt: ti.f64, search: ti.i32):
+    def _line_search(self, dt: ti.f64, search: ti.i32, multigrid: ti.i32) -> ti.types.vector(5, ti.f64):
         """dv_total += alpha dv, with alpha the longest of ALPHAS whose incremental potential IP satisfies the
         sufficient decrease (1 without the search; 1/8 when none does). IP and the total energy E (kinetic + spring +
         gravity) of every candidate are summed in float64 over the free particles and every spring, with the state
-        still at the iterate (its spring directions, its external forces). Leaves the Newton decrement and the rise
-        of E above the step's start in self.cg."""
+        still at the iterate (its spring directions, its external forces). Returns (CG iterations, the residual's
+        measure r.z at the end (multigrid: its last look), b.z_b, the Newton decrement [J], the rise of E above the
+        step's start [J])."""
         m, s, fm = self.model, self.state, self.forces
         A = ti.static(self.ALPHAS)
         NA = ti.static(len(self.ALPHAS))
@@ -484,6 +482,11 @@ class Implicit(Integrator):
         for i in range(m.n_particles[None]):
             if m.inv_mass[i] != 0:
                 self.dv_total[i] += ti.cast(alpha, m.fp) * self.dv[i]
+        measure = self.cg[self._DELTA]
+        if multigrid != 0:
+            measure = self.cg[self._RR]
+        return ti.Vector([self.cg[self._ITER], measure, self.cg[self._DELTA0], self.cg[self._DECREMENT],
+                          self.cg[self._RISE]], ti.f64)
 
     @ti.kernel
     def _finish(self, dt: ti.f64):
