@@ -46,10 +46,10 @@ def hanging_cloth(n: int, integrator: str, material: str = "cotton", dt: float |
 
 def multigrid_cloth(n: int, material: str = "cotton"):
     """The benchmark sheet as a 4-8 hierarchy on its finest level, (n+1) x (n+1) particles, for the implicit
-    integrator's multigrid preconditioner; None when n is not 2, 3 or 4 times a power of 2 (from 8 cells)."""
+    integrator's multigrid preconditioner; None when n is not 2, 3, 4 or 8 times a power of 2 (from 8 cells)."""
     from ..multilevel_cloth import multilevel_grid
 
-    for base in (4, 3, 2):
+    for base in (4, 3, 2, 8):  # 8 x 2^5 = 256 cells: 4 x 2^6 would need 13 levels, one more than a hierarchy holds
         j = (n // base).bit_length() - 1
         if n % base == 0 and n // base == 1 << j and 2 * j + 1 <= 12 and j >= 1:
             return multilevel_grid((1.0, 1.0), (base, base), 2 * j + 1, material, center=(0.0, 1.0, 0.0),

@@ -445,7 +445,7 @@ def plot(study: Study, agg: list[dict], presets: dict, path: Path) -> Path | Non
     fig, axes = plt.subplots(rows_, cols, figsize=(6.2 * cols, 4.6 * rows_), squeeze=False)
     for ax in axes.flat[len(names) + 1:]:
         ax.set_visible(False)
-    colors = {v: plt.cm.tab10(i % 10) for i, v in enumerate(VARIANTS)}
+    colors = {v: plt.cm.tab20(i % 20) for i, v in enumerate(VARIANTS)}  # more variants than tab10 has colours
     markers = ["o", "s", "^", "D", "v"]
     finest = study.settings["n_levels"]
     panels = [(name, [r for r in study.rows if r["scene"] == name]) for name in names] + [("all scenes", agg)]
