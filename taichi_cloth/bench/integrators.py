@@ -46,7 +46,7 @@ def hanging_cloth(n: int, integrator: str, material: str = "cotton", dt: float |
 
 def multigrid_cloth(n: int, material: str = "cotton"):
     """The benchmark sheet as a 4-8 hierarchy on its finest level, (n+1) x (n+1) particles, for the implicit
-    integrator's multigrid preconditioner; None when n is not 2, 3, 4 or 8 times a power of 2 (from 8 cells)."""
+    integrator's multigrid preconditioner; None unless n = b x 2^j cells, b in 2, 3, 4, 8 and j >= 1."""
     from ..multilevel_cloth import multilevel_grid
 
     for base in (4, 3, 2, 8):  # 8 x 2^5 = 256 cells: 4 x 2^6 would need 13 levels, one more than a hierarchy holds
