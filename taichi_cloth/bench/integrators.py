@@ -25,6 +25,9 @@ def add_arguments(p) -> None:
     p.add_argument("--material", default="cotton", help="material preset")
     p.add_argument("--no-multigrid", action="store_true",
                    help="skip the rows of the implicit integrator with its multigrid preconditioner (on a 4-8 grid)")
+    p.add_argument("--kernel-shares", action="store_true",
+                   help="instead of the timings: each kernel's share of a step (Taichi's kernel profiler, which "
+                        "slows every launch a little), to kernels.md and kernels.csv")
     p.add_argument("--arch", default="cpu", choices=("cpu", "gpu"))
     p.add_argument("--out", default="out/bench", help="folder for bench.csv, bench.md, bench.png")
 
@@ -119,14 +122,69 @@ def time_recorder(scene, out: Path, frames: int = 10) -> float:
     return ms
 
 
+def kernel_shares(scene, steps: int) -> dict:
+    """{kernel name: ms per step inside that kernel} over `steps` steps after 4 warm-up ones. Needs Taichi started
+    with kernel_profiler=True. Launch and host time is not in it: the profiler itself adds per-task overhead on the
+    CPU (a fused explicit step at 64x64 took 20 ms per step under it, 0.27 without), so compare the kernels' sum
+    with the plain bench's ms per step to see the launch and host share."""
+    import re
+
+    import taichi as ti
+    from taichi.lang import impl
+
+    scene.advance(4)
+    ti.sync()
+    ti.profiler.clear_kernel_profiler_info()
+    scene.advance(steps)
+    ti.sync()
+    shares: dict[str, float] = {}
+    for record in impl.get_runtime().prog.get_kernel_profiler_records():
+        # "<kernel>_c<id>_<instance>_kernel_<task>_<kind>": one record per offloaded task of a launch
+        name = re.sub(r"_c\d+_\d+_kernel_.*$", "", record.name)
+        shares[name] = shares.get(name, 0.0) + record.kernel_time / steps
+    return shares
+
+
+def _kernel_table(scenes, steps: int, out: Path) -> None:
+    rows = []
+    for label, n, scene in scenes:
+        shares = kernel_shares(scene, steps)
+        total = sum(shares.values())
+        for kernel, ms in sorted(shares.items(), key=lambda kv: -kv[1]):
+            if ms >= 0.005 * total:  # the kernels under half a per cent make no row
+                rows.append({"integrator": label, "n": n, "kernel": kernel, "ms_per_step": ms, "share": ms / total})
+        print(f"{label} {n}: {total:.3f} ms per step in kernels, "
+              + ", ".join(f"{r['kernel']} {100 * r['share']:.0f} %" for r in rows if r["integrator"] == label
+                          and r["n"] == n), flush=True)
+    lines = ["| integrator | n | kernel | ms per step | share of the kernels' time |", "|---|---|---|---|---|"]
+    lines += [f"| {r['integrator']} | {r['n']} | {r['kernel']} | {r['ms_per_step']:.3g} | {100 * r['share']:.1f} % |"
+              for r in rows]
+    (out / "kernels.md").write_text("\n".join(lines) + "\n")
+    with open(out / "kernels.csv", "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    print(f"wrote {out / 'kernels.md'}, {out / 'kernels.csv'}")
+
+
 def run(args) -> int:
     from .. import runtime
     from ..integrators import INTEGRATORS
 
-    runtime.init(args.arch)
+    runtime.init(args.arch, kernel_profiler=args.kernel_shares)
     names = args.integrators or list(INTEGRATORS)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
+    if args.kernel_shares:
+        def scenes():
+            for n in args.sizes:
+                for name in names:
+                    yield name, n, hanging_cloth(n, name, args.material)
+                mg = None if args.no_multigrid or "implicit" not in names else hanging_multigrid(n, args.material)
+                if mg is not None:
+                    yield "implicit multigrid", n + 1, mg
+        _kernel_table(scenes(), args.steps, out)
+        return 0
     rows = []
     for n in args.sizes:
         record_ms = None
