@@ -405,12 +405,56 @@ class Implicit(Integrator):
                 cg[self._ACTIVE] = 0.0
         return ti.cast(cg[self._ACTIVE] != 0, ti.i32)
 
+    @ti.func
+    def _particle_potential(self, i, hh, gamma, grav, ext, j0: ti.template(), j1: ti.template()):
+        """Adds particle i's inertia, gravity, air drag and external-force terms of IP, and its kinetic and gravity
+        energy, for the candidates j0 <= j < j1 (j = 0: alpha = 0, j: ALPHAS[j - 1])."""
+        m = self.model
+        A = ti.static(self.ALPHAS)
+        mass = ti.cast(m.mass[i], ti.f64)
+        d = ti.cast(self.dv[i], ti.f64)
+        base = ti.cast(self.dv_total[i], ti.f64)
+        v0 = ti.cast(self.v0[i], ti.f64)
+        x0 = ti.cast(self.x0[i], ti.f64)
+        for j in ti.static(range(j0, j1)):
+            a = 0.0 if j == 0 else A[j - 1]
+            dvt = base + a * d
+            v = v0 + dvt
+            x = x0 + hh * v
+            self.ip[j] += 0.5 * mass * dvt.dot(dvt) - mass * grav.dot(x) + 0.5 * hh * gamma * mass * v.dot(v) \
+                - hh * ext.dot(a * d)
+            self.energy[j] += 0.5 * mass * v.dot(v) - mass * grav.dot(x)
+
+    @ti.func
+    def _spring_potential(self, sp, hh, j0: ti.template(), j1: ti.template()):
+        """Adds spring sp's elastic and damping terms of IP, and its elastic energy, for the candidates j0 <= j < j1."""
+        m = self.model
+        A = ti.static(self.ALPHAS)
+        ia, ib = m.spring_a[sp], m.spring_b[sp]
+        k = ti.cast(m.stiffness[sp], ti.f64)
+        kd = ti.cast(m.damping[sp], ti.f64)
+        L0 = ti.cast(m.rest_length[sp], ti.f64)
+        u = ti.cast(self.spring_u[sp], ti.f64)
+        wa = ti.cast(m.inv_mass[ia] != 0, ti.f64)
+        wb = ti.cast(m.inv_mass[ib] != 0, ti.f64)
+        for j in ti.static(range(j0, j1)):
+            a = 0.0 if j == 0 else A[j - 1]
+            va = ti.cast(self.v0[ia], ti.f64) + wa * ti.cast(self.dv_total[ia] + a * self.dv[ia], ti.f64)
+            vb = ti.cast(self.v0[ib], ti.f64) + wb * ti.cast(self.dv_total[ib] + a * self.dv[ib], ti.f64)
+            xa = ti.cast(self.x0[ia], ti.f64) + wa * hh * va
+            xb = ti.cast(self.x0[ib], ti.f64) + wb * hh * vb
+            stretch = (xb - xa).norm() - L0
+            rel = (vb - va).dot(u)
+            self.ip[j] += 0.5 * k * stretch * stretch + 0.5 * hh * kd * rel * rel
+            self.energy[j] += 0.5 * k * stretch * stretch
+
     @ti.kernel
     def _line_search(self, dt: ti.f64, search: ti.i32, multigrid: ti.i32) -> ti.types.vector(5, ti.f64):
         """dv_total += alpha dv, with alpha the longest of ALPHAS whose incremental potential IP satisfies the
-        sufficient decrease (1 without the search; 1/8 when none does). IP and the total energy E (kinetic + spring +
-        gravity) of every candidate are summed in float64 over the free particles and every spring, with the state
-        still at the iterate (its spring directions, its external forces). Returns (CG iterations, the residual's
+        sufficient decrease (1 without the search; 1/8 when none does). The full step is evaluated first, the shorter
+        ones only when it fails (in the same launch). IP and the total energy E (kinetic + spring + gravity) of every
+        candidate are summed in float64 over the free particles and every spring, with the state still at the
+        iterate (its spring directions, its external forces). Returns (CG iterations, the residual's
         measure r.z at the end (multigrid: its last look), b.z_b, the Newton decrement [J], the rise of E above the
         step's start [J])."""
         m, s, fm = self.model, self.state, self.forces
@@ -424,44 +468,29 @@ class Implicit(Integrator):
         for j in ti.static(range(NA + 1)):
             self.energy[j] = 0.0
         work = ti.cast(0.0, ti.f64)  # of the external forces over the step [J]
+        # first the full step (j = 1, against j = 0); the shorter ones only where it does not decrease enough
         ti.loop_config(serialize=self.model.serial)
         for i in range(m.n_particles[None]):
             if m.inv_mass[i] != 0:
-                mass = ti.cast(m.mass[i], ti.f64)
-                d = ti.cast(self.dv[i], ti.f64)
-                base = ti.cast(self.dv_total[i], ti.f64)
-                v0 = ti.cast(self.v0[i], ti.f64)
-                x0 = ti.cast(self.x0[i], ti.f64)
                 ext = ti.cast(fm.source_force(i, s.x[i], s.v[i]), ti.f64)
+                d = ti.cast(self.dv[i], ti.f64)
                 self.ip[NA + 1] -= ti.cast(self.b[i], ti.f64).dot(d)  # grad . dv (b = -S grad)
-                work += hh * ext.dot(v0 + base + d)
-                for j in ti.static(range(NA + 1)):
-                    a = 0.0 if j == 0 else A[j - 1]
-                    dvt = base + a * d
-                    v = v0 + dvt
-                    x = x0 + hh * v
-                    self.ip[j] += 0.5 * mass * dvt.dot(dvt) - mass * grav.dot(x) + 0.5 * hh * gamma * mass * v.dot(v) \
-                        - hh * ext.dot(a * d)
-                    self.energy[j] += 0.5 * mass * v.dot(v) - mass * grav.dot(x)
+                work += hh * ext.dot(ti.cast(self.v0[i] + self.dv_total[i], ti.f64) + d)
+                self._particle_potential(i, hh, gamma, grav, ext, 0, 2)
         ti.loop_config(serialize=self.model.serial)
         for sp in range(m.n_springs[None]):
-            ia, ib = m.spring_a[sp], m.spring_b[sp]
-            k = ti.cast(m.stiffness[sp], ti.f64)
-            kd = ti.cast(m.damping[sp], ti.f64)
-            L0 = ti.cast(m.rest_length[sp], ti.f64)
-            u = ti.cast(self.spring_u[sp], ti.f64)
-            wa = ti.cast(m.inv_mass[ia] != 0, ti.f64)
-            wb = ti.cast(m.inv_mass[ib] != 0, ti.f64)
-            for j in ti.static(range(NA + 1)):
-                a = 0.0 if j == 0 else A[j - 1]
-                va = ti.cast(self.v0[ia], ti.f64) + wa * ti.cast(self.dv_total[ia] + a * self.dv[ia], ti.f64)
-                vb = ti.cast(self.v0[ib], ti.f64) + wb * ti.cast(self.dv_total[ib] + a * self.dv[ib], ti.f64)
-                xa = ti.cast(self.x0[ia], ti.f64) + wa * hh * va
-                xb = ti.cast(self.x0[ib], ti.f64) + wb * hh * vb
-                stretch = (xb - xa).norm() - L0
-                rel = (vb - va).dot(u)
-                self.ip[j] += 0.5 * k * stretch * stretch + 0.5 * hh * kd * rel * rel
-                self.energy[j] += 0.5 * k * stretch * stretch
+            self._spring_potential(sp, hh, 0, 2)
+        full = self.ip[1] <= self.ip[0] + self.ARMIJO * self.ip[NA + 1]
+        shorter = ti.cast(search != 0, ti.i32) * (1 - ti.cast(full, ti.i32))
+        ti.loop_config(serialize=self.model.serial)
+        for i in range(m.n_particles[None]):
+            if shorter != 0 and m.inv_mass[i] != 0:
+                ext = ti.cast(fm.source_force(i, s.x[i], s.v[i]), ti.f64)
+                self._particle_potential(i, hh, gamma, grav, ext, 2, NA + 1)
+        ti.loop_config(serialize=self.model.serial)
+        for sp in range(m.n_springs[None]):
+            if shorter != 0:
+                self._spring_potential(sp, hh, 2, NA + 1)
         alpha = ti.cast(A[NA - 1], ti.f64)  # the shortest, when none decreases enough
         energy = self.energy[NA]
         for jj in ti.static(range(NA)):
@@ -469,7 +498,7 @@ class Implicit(Integrator):
             ok = self.ip[j + 1] <= self.ip[0] + self.ARMIJO * A[j] * self.ip[NA + 1]
             alpha = ti.select(ok, A[j], alpha)
             energy = ti.select(ok, self.energy[j + 1], energy)
-        if search == 0:
+        if search == 0 or full:
             alpha = 1.0
             energy = self.energy[1]
         if alpha < 1.0:
