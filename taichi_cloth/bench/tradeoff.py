@@ -342,8 +342,9 @@ def aggregate(study: Study) -> list[dict]:
 
 def derive_presets(agg: list[dict], n_levels: int) -> dict[str, dict]:
     """preview / balanced / accurate: the cheapest configuration on the front of the variants that may be presets
-    (all but NOT_PRESETS) whose worst RMS error is under PRESET_ERRORS (accurate: the most accurate configuration if none is). Each preset: integrator, options,
-    dt [s] or dt_bound_fraction, level (relative to the finest: 0, -1, ...), and what was measured."""
+    (all but NOT_PRESETS) whose worst RMS error is under PRESET_ERRORS (accurate: the most accurate configuration
+    if none is). Each preset: integrator, options, dt [s] or dt_bound_fraction, level (relative to the finest: 0,
+    -1, ...), and what was measured."""
     candidates = [r for r in agg if r["variant"] not in NOT_PRESETS]
     front_flags = pareto_front([r["wall_per_sim_s"] for r in candidates], [r["rms_error"] for r in candidates])
     front = sorted((r for r, f in zip(candidates, front_flags) if f), key=lambda r: r["wall_per_sim_s"])
