@@ -207,8 +207,9 @@ def _check_step_options(dt, adaptive, fps, step_guard) -> bool:
 
 def _attach_levels(stepper, integrator: str, source: _Source, multilevel, specs, notes: list) -> None:
     """Give an integrator that asks for them the cloth's 4-8 levels (nested ones: global refinement). One that
-    cannot do without them refuses the scene; the implicit integrator's multigrid preconditioner falls back to
-    Jacobi (and says so when it was asked for by name)."""
+    cannot do without them refuses the scene; the implicit integrator's multigrid preconditioner builds levels by
+    aggregation instead (asked for by name, or on a cloth of at least its AGGREGATION_FROM particles), or falls back
+    to Jacobi (and says so when it was asked for by name)."""
     ml = source.multilevel
     why = None
     if ml is None:
@@ -224,6 +225,13 @@ def _attach_levels(stepper, integrator: str, source: _Source, multilevel, specs,
             why = str(err)
     if getattr(stepper, "levels_required", True):
         raise SceneError(f"integrator {integrator!r} with multigrid_cycles {why}")
+    if stepper.options.get("preconditioner") == "multigrid" or \
+            stepper.model.data.n_particles >= stepper.AGGREGATION_FROM:
+        try:  # levels of its own, by aggregation
+            stepper.attach_aggregation()
+            return
+        except ValueError as err:
+            why = f"{why}, and aggregation failed: {err}"
     if stepper.options.get("preconditioner") == "multigrid":
         msg = f"the multigrid preconditioner {why}; integrator {integrator!r} uses Jacobi instead"
         notes.append(msg)

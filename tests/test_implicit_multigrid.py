@@ -8,6 +8,7 @@ import taichi as ti
 
 import taichi_cloth as tc
 from conftest import current_level, spring_forces
+from multilevel.aggregation import AggregationMultigrid
 from taichi_cloth.multilevel_cloth import multilevel_grid
 from taichi_cloth.stability import stiffness_matrix
 
@@ -119,10 +120,20 @@ def test_the_scene_picks_the_preconditioner_the_cloth_allows_and_says_which():
     assert ml.integrator.multigrid is not None and "V-cycles over 3 4-8 levels" in ml.run(1, progress=False).format()
     grid = tc.Scene(tc.ClothBuilder.grid((0.5, 0.5), (6, 6)), dt=H)
     assert grid.integrator.multigrid is None and "Jacobi-preconditioned CG" in grid.run(1, progress=False).format()
-    with pytest.warns(UserWarning, match="multigrid preconditioner needs a multilevel cloth"):
-        asked = tc.Scene(tc.ClothBuilder.grid((0.5, 0.5), (6, 6)), dt=H,
-                         integrator_options={"preconditioner": "multigrid"})
-    assert asked.integrator.multigrid is None and any("uses Jacobi instead" in w for w in asked.warnings)
+    big = tc.Scene(tc.ClothBuilder.grid((1.0, 1.0), (45, 45)), dt=H)  # 2,025 particles: auto aggregates
+    assert isinstance(big.integrator.multigrid, AggregationMultigrid)
+    assert big.integrator.detail.startswith("CG preconditioned by V-cycles over 3 aggregation levels (2025 > ")
+    asked = tc.Scene(tc.ClothBuilder.grid((0.5, 0.5), (6, 6)), dt=H, integrator_options={"preconditioner": "multigrid"})
+    assert isinstance(asked.integrator.multigrid, AggregationMultigrid)
+    assert "V-cycles over 2 aggregation levels (36 > 4)" in asked.run(1, progress=False).format()
+    # 300 loose threads of one spring each: aggregated into 300 single vertices that do not coarsen further
+    x = np.stack([np.repeat(np.arange(300) * 0.02, 2), np.zeros(600), np.tile([0.0, 0.01], 300)], 1)
+    pairs = np.arange(600).reshape(300, 2)
+    threads = tc.ClothData(x, np.full(600, 1e-3), pairs, np.full(300, 0.01), np.full(300, 50.0), np.zeros(300),
+                           np.full(300, int(tc.SpringKind.STRUCTURAL)))
+    with pytest.warns(UserWarning, match="aggregation failed: aggregation stopped at 300 vertices"):
+        loose = tc.Scene(threads, dt=H, integrator_options={"preconditioner": "multigrid"})
+    assert loose.integrator.multigrid is None and any("uses Jacobi instead" in w for w in loose.warnings)
     with pytest.raises(tc.SceneError, match="preconditioner"):
         tc.load_scene({"cloth": {"grid": {"size": [0.5, 0.5], "resolution": [4, 4]}},
                        "integrator": {"name": "implicit", "dt": 0.01, "preconditioner": "ilu"}})
@@ -141,3 +152,130 @@ def test_the_preconditioner_follows_level_switches_without_compiling():
     assert cc.total == 0, cc.compiled
     assert current_level(sc) == 3 and sc.integrator.multigrid.active == 3
     assert sc.check().max_strain < 0.05
+
+
+def sewn_pair_on_a_ball(preconditioner: str, tolerance: float = 1e-12, **options):
+    """Two 0.2 m squares sewn into one 0.4 x 0.2 m sheet (the seam merged: a garment's topology, no 4-8 levels),
+    held by its back edge, dropped onto a ball: after 12 steps part of it lies on the ball (contacts) and part hangs
+    free."""
+    from taichi_cloth.garment.garment import FreePlacement, GarmentSpec, build_garment
+    from taichi_cloth.garment.seams import Seam, SeamSide
+    from taichi_cloth.garment.sewing import merge_seams
+    from test_garment import square
+
+    seam = Seam("middle", SeamSide("A", "br", "tr"), SeamSide("B", "bl", "tl"))
+    flat = {"v_axis": (0.0, 0.0, 1.0)}
+    g = build_garment(GarmentSpec("sewn pair", [square("A"), square("B")], [seam],
+                                  {"A": FreePlacement((-0.2, 0.6, -0.1), **flat),
+                                   "B": FreePlacement((0.0, 0.6, -0.1), **flat)}, spacing=0.02))
+    x = g.data.positions
+    data, _, _, _ = merge_seams(g.data, g, x, np.zeros_like(x))
+    back = {"box": ((-0.21, 0.59, -0.11), (0.21, 0.61, -0.09))}
+    sc = tc.Scene(data, dt=H, air_damping=GAMMA, precision="f64", pins=[back], colliders=[BALL],
+                  integrator_options={"preconditioner": preconditioner, "cg_tolerance": tolerance,
+                                      "cg_max_iterations": 2000, **options})
+    sc.step(12)
+    return sc
+
+
+@pytest.mark.parametrize("preconditioner", ["multigrid", "jacobi"])
+def test_a_step_of_a_sewn_garment_equals_the_direct_solve(preconditioner):
+    sc = sewn_pair_on_a_ball(preconditioner, newton_iterations=1, line_search=False)
+    n = sc.model.data.n_particles
+    assert n == 2 * 11 * 11 - 11 and sc.model.pinned.sum() == 21
+    touching = np.linalg.norm(sc.state.contacts.normal.to_numpy()[:n], axis=1) > 0
+    assert 4 < touching.sum() < n - 10, touching.sum()
+    mg = sc.integrator.multigrid
+    if preconditioner == "multigrid":
+        assert isinstance(mg, AggregationMultigrid) and len(mg.sizes) >= 2, sc.integrator.detail
+    else:
+        assert mg is None
+    expected = filtered_solve(sc)
+    v = sc.velocities()
+    sc.integrator.step(sc.dt)
+    np.testing.assert_allclose(sc.velocities() - v, expected, rtol=0, atol=1e-9 * np.abs(expected).max())
+
+
+def test_an_aggregation_v_cycle_is_symmetric_and_positive_and_its_levels_are_galerkin():
+    """The aggregation cycle is the symmetric positive definite operator CG needs, and every coarse level is
+    P^T A~ P of the level above (P the aggregates' piecewise-constant prolongation): checked on the sewn pair
+    against the blocks of the filtered operator A~ = S A S + M' (I - S) built here."""
+    sc = sewn_pair_on_a_ball("multigrid")
+    mg = sc.integrator.multigrid
+    integ = sc.integrator
+    integ._assemble(H, 1e-6, 10, 1)  # the Newton system's springs at the current state
+    mg.prepare(integ.spring_u, integ.spring_axial, integ.spring_iso, sc.model.mass, sc.model.inv_mass,
+               sc.state.contacts.normal, 1 + H * GAMMA)
+    n = sc.model.data.n_particles
+    rng = np.random.default_rng(7)
+    src, out = ti.Vector.field(3, ti.f64, n), ti.Vector.field(3, ti.f64, n)
+
+    def V(r):
+        src.from_numpy(r)
+        mg.apply(src, out)
+        return out.to_numpy()
+
+    r1, r2 = rng.standard_normal((n, 3)), rng.standard_normal((n, 3))
+    z1, z2 = V(r1), V(r2)
+    assert abs((z1 * r2).sum() - (r1 * z2).sum()) <= 1e-10 * abs((z1 * r2).sum())
+    np.testing.assert_allclose(V(2 * r1 - 3 * r2), 2 * z1 - 3 * z2, rtol=0, atol=1e-10 * np.abs(z1).max())
+    assert (z1 * r1).sum() > 0 and (z2 * r2).sum() > 0
+
+    def dense(level):
+        lo, hi = mg.vbound.to_numpy()[level:level + 2]
+        elo, ehi = mg.ebound.to_numpy()[level:level + 2]
+        A = np.zeros((3 * (hi - lo), 3 * (hi - lo)))
+        diag, off = mg.diag.to_numpy(), mg.off.to_numpy()
+        ea, eb = mg.end_a.to_numpy() - lo, mg.end_b.to_numpy() - lo
+        for g in range(hi - lo):
+            A[3 * g:3 * g + 3, 3 * g:3 * g + 3] = diag[lo + g]
+        for q in range(elo, ehi):
+            a, b = ea[q], eb[q]
+            A[3 * a:3 * a + 3, 3 * b:3 * b + 3] += off[q]
+            A[3 * b:3 * b + 3, 3 * a:3 * a + 3] += off[q].T
+        return A
+
+    # level 0 is A~ of the formulas
+    d, x = sc.model.data, sc.positions()
+    length = np.linalg.norm(x[d.springs[:, 1]] - x[d.springs[:, 0]], axis=1)
+    K = stiffness_matrix(x, d.springs, d.stiffness, d.rest_length)
+    D = stiffness_matrix(x, d.springs, d.damping, length)
+    A = np.diag(np.repeat(d.mass, 3) * (1 + H * GAMMA)) + H * D + H * H * K
+    normals = sc.state.contacts.normal.to_numpy()[:n]
+    S = np.zeros((3 * n, 3 * n))
+    for i in range(n):
+        nn = normals[i] @ normals[i]
+        Si = np.zeros((3, 3)) if sc.model.pinned[i] else np.eye(3) - (np.outer(normals[i], normals[i]) / nn
+                                                                      if nn > 0 else 0)
+        S[3 * i:3 * i + 3, 3 * i:3 * i + 3] = Si
+    M = np.diag(np.repeat(d.mass, 3) * (1 + H * GAMMA))
+    At = S @ A @ S + M @ (np.eye(3 * n) - S)
+    np.testing.assert_allclose(dense(0), At, rtol=0, atol=1e-12 * np.abs(At).max())
+    agg = mg.agg.to_numpy()
+    vb = mg.vbound.to_numpy()
+    for level in range(1, len(mg.sizes)):
+        fine, coarse = dense(level - 1), dense(level)
+        P = np.zeros((len(fine), len(coarse)))
+        for i in range(mg.sizes[level - 1]):
+            c = agg[vb[level - 1] + i] - vb[level]
+            P[3 * i:3 * i + 3, 3 * c:3 * c + 3] = np.eye(3)
+        np.testing.assert_allclose(coarse, P.T @ fine @ P, rtol=0, atol=1e-12 * np.abs(fine).max())
+
+
+def test_aggregation_levels_follow_the_seam_merge_without_compiling():
+    from taichi_cloth.garment.garment import build_garment
+    from test_garment import two_squares
+
+    g = build_garment(two_squares())
+    sc = tc.Scene(g, dt=1 / 240, gravity=(0, 0, 0), sewing=dict(close_speed=0.5, epsilon=0.002),
+                  integrator_options={"preconditioner": "multigrid"})
+    sc.run(2, progress=False)
+    mg = sc.integrator.multigrid
+    assert mg.sizes[0] == g.data.n_particles
+    with tc.CompileCounter() as cc:
+        sc.run(58, progress=False)
+    assert sc.controller("sewing").joined
+    assert mg.sizes[0] == sc.model.data.n_particles == g.data.n_particles - len(g.seam_pairs)
+    # the merge reloads the level tables: only Taichi's own numpy transfers compile, no kernel of the engine
+    assert all("ext_arr" in k for k in cc.compiled), cc.compiled
+    assert sc.integrator.last_residual <= 1e-3
