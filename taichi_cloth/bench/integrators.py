@@ -1,8 +1,10 @@
 """ms per step and real-time factor of every integrator (`python -m taichi_cloth bench [integrators]`).
 
 On square grids: ms per step, compile time, and wall time per simulated second of a hanging cloth at each
-integrator's largest stable step; and the implicit integrator with its multigrid preconditioner on the same sheet
-built as a 4-8 hierarchy ((n+1) x (n+1) particles, on its finest level), where n allows one.
+integrator's largest stable step (the implicit one with Jacobi-preconditioned CG); the implicit integrator with its
+multigrid preconditioner on the same grid by aggregation ("implicit aggregation") and on the same sheet built as a
+4-8 hierarchy ((n+1) x (n+1) particles, on its finest level, "implicit multigrid"), where n allows one; and a
+garment (the T-shirt of the demos, after its seams are joined) with both preconditioners.
 
 "Largest stable step": 0.9 x the linear-theory bound for the explicit family (docs/algorithms.md, step limits);
 1/60 s (one step per displayed frame) for the unconditionally stable ones. Times are wall clock after a
@@ -16,6 +18,8 @@ import time
 from pathlib import Path
 
 FRAME_DT = 1.0 / 60.0
+#: the garment timed by default: the T-shirt demo's scene, where the project's demos are beside the package
+GARMENT = Path(__file__).resolve().parents[2] / "demos" / "scenes" / "sew_tshirt.toml"
 
 
 def add_arguments(p) -> None:
@@ -24,7 +28,10 @@ def add_arguments(p) -> None:
     p.add_argument("--steps", type=int, default=20, help="steps per timed block (5 blocks, median reported)")
     p.add_argument("--material", default="cotton", help="material preset")
     p.add_argument("--no-multigrid", action="store_true",
-                   help="skip the rows of the implicit integrator with its multigrid preconditioner (on a 4-8 grid)")
+                   help="skip the rows of the implicit integrator with its multigrid preconditioner (aggregation, 4-8)")
+    p.add_argument("--garment", default=str(GARMENT) if GARMENT.exists() else "none",
+                   help="scene file of a garment timed with the implicit integrator once its seams are joined "
+                        "(default: the T-shirt demo's); none: skip")
     p.add_argument("--kernel-shares", action="store_true",
                    help="instead of the timings: each kernel's share of a step (Taichi's kernel profiler, which "
                         "slows every launch a little), to kernels.md and kernels.csv")
@@ -168,15 +175,34 @@ def _kernel_table(scenes, steps: int, out: Path) -> None:
     print(f"wrote {out / 'kernels.md'}, {out / 'kernels.csv'}")
 
 
+def garment_scene(path, preconditioner: str, frames: int = 90):
+    """The garment scene file at `path` with the implicit integrator and `preconditioner`, run for `frames` frames
+    (the T-shirt's seams join after about 0.75 s)."""
+    from ..scenefile import load_scene
+
+    scene = load_scene(path, integrator="implicit", integrator_options={"preconditioner": preconditioner}).scene
+    scene.run(frames, progress=False)
+    return scene
+
+
 def _scenes(args, names):
-    """(label, size n, scene) for every size and integrator named, then the multigrid sheet of that size ((n+1)^2
-    particles) where there is one and the implicit integrator is named."""
+    """(label, size n, scene) for every size and integrator named (the implicit one with Jacobi), then, where the
+    implicit integrator is named, the same grid with the aggregation multigrid and the multigrid sheet of that size
+    ((n+1)^2 particles) where there is one; last the garment with both preconditioners."""
+    mg = not args.no_multigrid and "implicit" in names
     for n in args.sizes:
         for name in names:
-            yield name, n, hanging_cloth(n, name, args.material)
-        mg = None if args.no_multigrid or "implicit" not in names else hanging_multigrid(n, args.material)
-        if mg is not None:
-            yield "implicit multigrid", n, mg
+            yield name, n, hanging_cloth(n, name, args.material, **({"preconditioner": "jacobi"}
+                                                                     if name == "implicit" else {}))
+        if mg:
+            yield "implicit aggregation", n, hanging_cloth(n, "implicit", args.material, preconditioner="multigrid")
+        sheet = hanging_multigrid(n, args.material) if mg else None
+        if sheet is not None:
+            yield "implicit multigrid", n, sheet
+    if args.garment != "none" and "implicit" in names:
+        for pre, label in (("jacobi", "garment implicit"), ("multigrid", "garment implicit aggregation")):
+            scene = garment_scene(args.garment, pre)
+            yield label, round(scene.model.data.n_particles ** 0.5), scene
 
 
 def run(args) -> int:
