@@ -222,7 +222,7 @@ class Implicit(Integrator):
             self._warned_cap = True  # backward Euler only dissipates: say it once when the cap lets a step gain energy
             warn(f"implicit: CG stopped at its cap of {budget} iterations (relative residual {residual:.2g}) and the "
                  f"step gained {rise:.3g} J; raise cg_max_iterations"
-                 + ("" if self.multigrid is not None else " or use a multilevel cloth (multigrid preconditioner)"))
+                 + ("" if self.multigrid is not None else ' or set preconditioner = "multigrid"'))
         self.last_residual = residual
         self.stats["cg_iterations"] += its
         self.stats["cg_unconverged_steps"] += min(unconverged, 1)
