@@ -262,18 +262,20 @@ def _write(rows: list[dict], out: Path, args) -> None:
     except ImportError:
         print("matplotlib not installed: no plot")
         return
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.8))
     for name in dict.fromkeys(r["integrator"] for r in rows):
         rs = [r for r in rows if r["integrator"] == name]
-        axes[0].loglog([r["particles"] for r in rs], [r["ms_per_step"] for r in rs], "o-", label=name)
-        axes[1].loglog([r["particles"] for r in rs], [r["realtime_factor"] for r in rs], "o-", label=name)
+        style = dict(marker="*", ms=11, ls="none") if name.startswith("garment") else dict(marker="o")
+        axes[0].loglog([r["particles"] for r in rs], [r["ms_per_step"] for r in rs], label=name, **style)
+        axes[1].loglog([r["particles"] for r in rs], [r["realtime_factor"] for r in rs], label=name, **style)
     axes[0].set(xlabel="particles", ylabel="ms per step", title="cost of one step")
     axes[1].axhline(1.0, color="k", lw=0.8, ls="--")
     axes[1].set(xlabel="particles", ylabel="simulated s per wall s",
                 title="hanging cloth at the largest stable step")
     for ax in axes:
         ax.grid(True, which="both", alpha=0.3)
-    axes[0].legend()
-    fig.tight_layout()
+    handles, labels = axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=5, fontsize=8)
+    fig.tight_layout(rect=(0, 0.1, 1, 1))
     fig.savefig(out / "bench.png", dpi=110)
     print(f"wrote {out / 'bench.md'}, {out / 'bench.csv'}, {out / 'bench.png'}")
