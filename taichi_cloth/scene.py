@@ -362,11 +362,9 @@ class _FrameLog:
 
     def begin(self, scene: Scene, translation) -> None:
         events = scene._collect(self.summary)
-        if self.recorder is not None:
-            t0 = time.perf_counter()
+        if self.recorder is not None:  # not in wall_record: like frame 1's steps, the start compiles (the normals)
             self.recorder.begin_cloth(self.entity, scene.layout(), translation)
             self.recorder.log_frame(self.entity, scene.snapshot(0, scene.measure(), events=events))
-            self.summary.wall_record += time.perf_counter() - t0
 
     def frame(self, scene: Scene, frame: int, m: Measurement, steps_per_s: float | None, new_topology: bool) -> None:
         events = scene._collect(self.summary)
