@@ -37,6 +37,8 @@ import taichi as ti
 
 from clothbase.fields import FieldBlock
 
+from .dense import cholesky, cholesky_solve
+
 #: the most levels (the cloth itself included); a 256 x 256 sheet needs 5
 MAX_LEVELS = 6
 #: aggregate until at most this many vertices remain (the coarsest level is factored densely at every step)
@@ -352,17 +354,7 @@ class AggregationMultigrid:
                     for d in ti.static(range(3)):
                         self.chol[3 * a + c, 3 * b + d] = O[c, d]
                         self.chol[3 * b + d, 3 * a + c] = O[c, d]
-            for j in range(C):  # Cholesky, column by column, in place (lower triangle)
-                s = self.chol[j, j]
-                for k in range(j):
-                    s -= self.chol[j, k] * self.chol[j, k]
-                djj = ti.sqrt(ti.max(s, 1e-300))
-                self.chol[j, j] = djj
-                for i in range(j + 1, C):
-                    t = self.chol[i, j]
-                    for k in range(j):
-                        t -= self.chol[i, k] * self.chol[j, k]
-                    self.chol[i, j] = t / djj
+            cholesky(self.chol, C)
 
     @ti.kernel
     def _cycle(self, r: ti.template(), z: ti.template()):
@@ -394,17 +386,7 @@ class AggregationMultigrid:
             for g in range(v0, v1):
                 for c in ti.static(range(3)):
                     self.work[3 * (g - v0) + c] = ti.cast(self.b[g][c], ti.f64)
-            for i in range(C):
-                t = self.work[i]
-                for k in range(i):
-                    t -= self.chol[i, k] * self.work[k]
-                self.work[i] = t / self.chol[i, i]
-            for ii in range(C):
-                i = C - 1 - ii
-                t = self.work[i]
-                for k in range(i + 1, C):
-                    t -= self.chol[k, i] * self.work[k]
-                self.work[i] = t / self.chol[i, i]
+            cholesky_solve(self.chol, self.work, C)
             for g in range(v0, v1):
                 k = 3 * (g - v0)
                 self.x[g] = ti.Vector([self.work[k], self.work[k + 1], self.work[k + 2]], self.fp)

@@ -70,7 +70,8 @@ class LevelOperator:
 
     mass:      (n,) float64 [kg]    lumped particle masses (> 0 on every unpinned particle)
     springs:   (s, 2) int64         particle indices (of this level) of each spring's two ends
-    stiffness: (s,) float64 [N/m]   spring constants k (the isotropic J~ of docs/algorithms.md, approximate implicit step)
+    stiffness: (s,) float64 [N/m]   spring constants k (the isotropic J~ of the approximate implicit step,
+                                    docs/algorithms.md)
     pinned:    (n,) bool            True where dv = 0 (the row is left out of the system)
     """
 

@@ -325,7 +325,8 @@ def _inside_polygon(points: np.ndarray, P: np.ndarray) -> np.ndarray:
         q = points[s:s + 2048, None, :]
         cond = (A[None, :, 1] > q[..., 1]) != (B[None, :, 1] > q[..., 1])
         with np.errstate(divide="ignore", invalid="ignore"):
-            x = A[None, :, 0] + (q[..., 1] - A[None, :, 1]) * (B[None, :, 0] - A[None, :, 0]) / (B[None, :, 1] - A[None, :, 1])
+            x = A[None, :, 0] + (q[..., 1] - A[None, :, 1]) * (B[None, :, 0] - A[None, :, 0]) \
+                / (B[None, :, 1] - A[None, :, 1])
         inside[s:s + 2048] = (np.sum(cond & (q[..., 0] < x), axis=1) % 2) == 1
     return inside
 

@@ -37,6 +37,7 @@ import taichi as ti
 
 from clothbase.fields import FieldBlock
 
+from .dense import cholesky, cholesky_solve
 from .hierarchy import Level
 
 #: block-Jacobi weight; the scipy prototype measured 0.67 best among 0.5, 0.67 and 0.8 for V(1,1) cycles
@@ -93,7 +94,7 @@ class SpringMultigrid:
         N, Ns = int(self.offsets[-1]), int(self.spring_offsets[-1])
 
         # ---- host tables
-        ends, gends = [], []
+        ends = []
         rows, adj_other, adj_spring = [], [], []
         for l, s in enumerate(springs):
             s = np.asarray(s, np.int64).reshape(-1, 2)
@@ -317,17 +318,7 @@ class SpringMultigrid:
                             for c in ti.static(range(3)):
                                 for d in ti.static(range(3)):
                                     self.chol[3 * v + c, 3 * w + d] -= B[c, d]
-            for j in range(C):  # Cholesky, column by column, in place (lower triangle)
-                s = self.chol[j, j]
-                for k in range(j):
-                    s -= self.chol[j, k] * self.chol[j, k]
-                djj = ti.sqrt(ti.max(s, 1e-300))
-                self.chol[j, j] = djj
-                for i in range(j + 1, C):
-                    t = self.chol[i, j]
-                    for k in range(j):
-                        t -= self.chol[i, k] * self.chol[j, k]
-                    self.chol[i, j] = t / djj
+            cholesky(self.chol, C)
 
     @ti.func
     def _smooth(self, l: ti.template(), from_zero: ti.template()):
@@ -394,17 +385,7 @@ class SpringMultigrid:
             for v in range(n0):
                 for c in ti.static(range(3)):
                     self.work[3 * v + c] = ti.cast(self.b[v][c], ti.f64)
-            for i in range(C):
-                t = self.work[i]
-                for k in range(i):
-                    t -= self.chol[i, k] * self.work[k]
-                self.work[i] = t / self.chol[i, i]
-            for ii in range(C):
-                i = C - 1 - ii
-                t = self.work[i]
-                for k in range(i + 1, C):
-                    t -= self.chol[k, i] * self.work[k]
-                self.work[i] = t / self.chol[i, i]
+            cholesky_solve(self.chol, self.work, C)
             for v in range(n0):
                 out = ti.Vector.zero(self.fp, 3)
                 if self.pin[v] == 0:

@@ -60,7 +60,8 @@ class Scene:
         hooks = lambda name, cs: [getattr(c, name) for c in cs if overrides(c, name)]  # noqa: E731
         stepping = [c for c in self.controllers if c.per_step]
         self._before_step, self._after_step = hooks("before_step", stepping), hooks("after_step", stepping)
-        self._after_frame, self._model_changed = hooks("after_frame", self.controllers), hooks("model_changed", self.controllers)
+        self._after_frame = hooks("after_frame", self.controllers)
+        self._model_changed = hooks("model_changed", self.controllers)
         self._record = hooks("record", self.controllers)
         # substeps fused into the integrator's kernels where nothing between them needs the host
         inline = [c.inline_step() for c in stepping if overrides(c, "before_step") or overrides(c, "after_step")]
