@@ -21,6 +21,7 @@ from .forces import ForceModel
 from .integrators import integrator_class
 from .model import Model, State
 from .pins import Pins, PinSpec, pinned_mask
+from .rest import RestCriterion
 from .stability import omega_max_estimate, stable_dt
 from .stretch_limit import StretchLimit
 from .wind import Wind
@@ -45,6 +46,8 @@ class SceneParts:
     warnings: list = field(default_factory=list)
     max_speed: float = 200.0
     max_strain: float = 10.0
+    rest: RestCriterion = field(default_factory=RestCriterion)
+    stop_at_rest: bool = False
 
 
 def assemble(cloth, *, name: str = "cloth", integrator: str = DEFAULT_INTEGRATOR, dt: float | str = 1.0 / 240.0,
@@ -52,7 +55,8 @@ def assemble(cloth, *, name: str = "cloth", integrator: str = DEFAULT_INTEGRATOR
              wind: dict | None = None, stretch_limit: dict | None = None, colliders=(), self_collision=False,
              multilevel: dict | None = None, sewing: dict | None = None, body_morph: dict | None = None,
              fps: float = 60.0, adaptive: dict | None = None, precision: str = "f32", step_guard: str = "warn",
-             max_speed: float = 200.0, max_strain: float = 10.0, base_dir=None) -> SceneParts:
+             max_speed: float = 200.0, max_strain: float = 10.0, rest: dict | None = None,
+             base_dir=None) -> SceneParts:
     """The parts of a scene (Scene(cloth, **options) calls this). Units are SI.
 
     cloth:              ClothData, a Model, a MultilevelCloth (ClothBuilder.multilevel_grid) or a GarmentCloth
@@ -83,9 +87,12 @@ def assemble(cloth, *, name: str = "cloth", integrator: str = DEFAULT_INTEGRATOR
     precision:          "f32" or "f64" fields
     step_guard:         what to do when an explicit integrator's dt exceeds its stable bound: warn | refuse | off
     max_speed [m/s], max_strain [-]: beyond these (or at any NaN) a run is declared blown up
+    rest:               when the cloth counts as at rest (RestCriterion keyword arguments: max_speed, p99_speed
+                        [m/s], window [s]) and stop (bool, default False): Scene.run ends the run there
     base_dir:           the folder relative collider mesh paths are read from
     """
     auto = _check_step_options(dt, adaptive, fps, step_guard)
+    rest_criterion, stop_at_rest = _rest(rest)
     source = _cloth_source(cloth, precision, multilevel, sewing, self_collision)
     model = source.model
     state = State(model)
@@ -144,7 +151,21 @@ def assemble(cloth, *, name: str = "cloth", integrator: str = DEFAULT_INTEGRATOR
     controllers = [c for c in (refiner, morph, pin_control, sew, limit, collide, strain_map) if c is not None]
     return SceneParts(name, model, state, forces, stepper, clock, controllers,
                       wind_source.normals if wind_source is not None else None, parts_warnings,
-                      float(max_speed), float(max_strain))
+                      float(max_speed), float(max_strain), rest_criterion, stop_at_rest)
+
+
+def _rest(options: dict | None) -> tuple[RestCriterion, bool]:
+    opts = dict(options or {})
+    stop = opts.pop("stop", False)
+    if not isinstance(stop, bool):
+        raise SceneError(f"rest stop must be true or false, got {stop!r}")
+    try:
+        return RestCriterion(**opts), stop
+    except TypeError:
+        raise SceneError(f"rest has no option {sorted(set(opts) - set(RestCriterion.__dataclass_fields__))[0]!r} "
+                         "(options: stop, max_speed, p99_speed, window, energy_tolerance)") from None
+    except ValueError as err:
+        raise SceneError(str(err)) from None
 
 
 # ---------------------------------------------------------------------- the cloth source

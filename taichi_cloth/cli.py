@@ -26,6 +26,9 @@ def add_run_arguments(p: argparse.ArgumentParser, frames_default=None) -> None:
     p.add_argument("--quality", choices=QUALITIES, help="a measured preset (integrator, step, level) from `bench "
                    "tradeoff`: preview | balanced | accurate; --integrator and --dt still override it")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--until-rest", action="store_true",
+                   help="end the run at the first frame at which the cloth is at rest (the scene's [rest] criterion; "
+                        "--frames is then the most it runs)")
 
 
 def _step(text: str):
@@ -65,7 +68,8 @@ def run_scene_file(scene_path, args, quiet: bool = False):
     summary = None
     try:
         summary = scene.run(loaded.frames, recorder=rec, progress=not getattr(args, "no_progress", False),
-                            record_every=loaded.output["record_every"])
+                            record_every=loaded.output["record_every"],
+                            until_rest=True if getattr(args, "until_rest", False) else None)
     except BlowUpError as err:
         summary = getattr(err, "summary", None)
         raise

@@ -90,6 +90,11 @@ class Controller:
     stats: Mapping[str, float] = MappingProxyType({})  # a controller with counters sets its own dict
 
     @property
+    def busy(self) -> str | None:
+        """What this controller is still doing that a drape at rest must wait for (e.g. "sewing"), or None."""
+        return None
+
+    @property
     def per_step(self) -> bool:
         """Whether this controller's before_step/after_step have work in this scene (the scene skips them when
         not; e.g. pins without a path)."""

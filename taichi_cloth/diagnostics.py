@@ -1,5 +1,6 @@
-"""Energy, strain and sanity measurements of a state, in one Taichi kernel (run once per frame)."""
+"""Energy, strain, motion and sanity measurements of a state, in one Taichi kernel (run once per frame)."""
 
+import math
 from dataclasses import dataclass
 
 import taichi as ti
@@ -8,13 +9,16 @@ from clothbase.fields import FieldBlock
 
 from .cloth import SpringKind
 
-_KINETIC, _ELASTIC, _GRAVITY, _MAX_STRAIN, _MAX_SPEED, _NONFINITE = range(6)
+_KINETIC, _ELASTIC, _GRAVITY, _MAX_STRAIN, _MAX_SPEED, _NONFINITE, _MOTION, _FAST = range(8)
 
 
 @dataclass(frozen=True)
 class Measurement:
     """kinetic, elastic, gravity [J] (gravity potential -sum m g.x), total [J], max_strain [-] over structural
-    springs (l/L0 - 1), max_speed [m/s], nonfinite: count of particles with a NaN/inf (or > 1e30) coordinate."""
+    springs (l/L0 - 1), max_speed [m/s] (of the velocities), nonfinite: count of particles with a NaN/inf (or > 1e30)
+    coordinate; motion_speed [m/s]: the fastest free particle's displacement since the previous measurement divided
+    by the simulated time between them (inf when there is none: the first, or the first after the particles
+    changed); motion_fast: the fraction of free particles whose motion speed exceeds Diagnostics.fast_speed."""
 
     kinetic: float
     elastic: float
@@ -22,6 +26,8 @@ class Measurement:
     max_strain: float
     max_speed: float
     nonfinite: int
+    motion_speed: float = math.inf
+    motion_fast: float = 1.0
 
     @property
     def potential(self) -> float:
@@ -34,20 +40,39 @@ class Measurement:
 
 @ti.data_oriented
 class Diagnostics:
-    def __init__(self, model, state, forces):
+    """Measures the state of (model, state, forces). fast_speed [m/s]: the threshold of Measurement.motion_fast."""
+
+    def __init__(self, model, state, forces, fast_speed: float = 1e-3):
         self.model, self.state, self.forces = model, state, forces
+        self.fast_speed = float(fast_speed)
         blk = FieldBlock()
-        self.out = blk.scalar(ti.f64, 6)
+        self.out = blk.scalar(ti.f64, 8)
+        self.x_last = blk.vector(3, model.fp, model.capacity[0])  # the positions at the last measurement [m]
         blk.finalize(self)
+        self._t_last: float | None = None  # simulated time of x_last; None: no valid x_last
+        self._motion = (math.inf, 1.0)
+
+    def forget(self) -> None:
+        """The particles changed (a refill): the next measurement has no motion to report."""
+        self._t_last = None
+        self._motion = (math.inf, 1.0)
 
     def measure(self) -> Measurement:
-        self._measure()
+        t = float(self.state.t)
+        elapsed = 0.0 if self._t_last is None else t - self._t_last
+        update = self._t_last is None or elapsed > 0  # a second measurement at the same time keeps the motion
+        self._measure(elapsed if elapsed > 0 else 0.0, self.fast_speed, int(update))
         o = self.out.to_numpy()
+        if update:
+            self._motion = (float(o[_MOTION]), float(o[_FAST])) if elapsed > 0 else (math.inf, 1.0)
+            self._t_last = t
         return Measurement(float(o[_KINETIC]), float(o[_ELASTIC]), float(o[_GRAVITY]), float(o[_MAX_STRAIN]),
-                           float(o[_MAX_SPEED]), int(o[_NONFINITE]))
+                           float(o[_MAX_SPEED]), int(o[_NONFINITE]), *self._motion)
 
     @ti.kernel
-    def _measure(self):
+    def _measure(self, elapsed: ti.f64, fast_speed: ti.f64, update: ti.i32):
+        """Energies, strain, speed; with `update`, the motion since x_last over `elapsed` [s] (when > 0) and x_last
+        set to the positions now."""
         m, s = self.model, self.state
         # kernel-local accumulators: Taichi reduces them per thread, no contended global atomics
         kinetic = ti.cast(0.0, ti.f64)
@@ -56,6 +81,9 @@ class Diagnostics:
         max_speed = ti.cast(0.0, ti.f64)
         max_strain = ti.cast(0.0, ti.f64)
         nonfinite = 0
+        motion = ti.cast(0.0, ti.f64)
+        fast = 0
+        free = 0
         g = ti.cast(self.forces.gravity[None], ti.f64)
         ti.loop_config(serialize=self.model.serial)
         for i in range(m.n_particles[None]):
@@ -72,6 +100,14 @@ class Diagnostics:
                 kinetic += 0.5 * mass * v.dot(v)
                 gravity -= mass * g.dot(x)
                 ti.atomic_max(max_speed, v.norm())
+            if update != 0:
+                if elapsed > 0 and m.inv_mass[i] != 0:
+                    speed = (x - ti.cast(self.x_last[i], ti.f64)).norm() / elapsed
+                    ti.atomic_max(motion, speed)
+                    free += 1
+                    if speed > fast_speed:
+                        fast += 1
+                self.x_last[i] = s.x[i]
         ti.loop_config(serialize=self.model.serial)
         for sp in range(m.n_springs[None]):
             d = ti.cast(s.x[m.spring_b[sp]] - s.x[m.spring_a[sp]], ti.f64)
@@ -87,3 +123,5 @@ class Diagnostics:
         self.out[_MAX_STRAIN] = max_strain
         self.out[_MAX_SPEED] = max_speed
         self.out[_NONFINITE] = nonfinite
+        self.out[_MOTION] = motion
+        self.out[_FAST] = ti.cast(fast, ti.f64) / ti.cast(ti.max(free, 1), ti.f64)

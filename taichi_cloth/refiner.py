@@ -128,6 +128,10 @@ class Refiner(Controller):
         """No further refinement: the finest level (global), or nothing left to refine (local)."""
         return self.level == self.cloth.n_levels - 1 or self._exhausted
 
+    @property
+    def busy(self) -> str | None:
+        return "refinement to the finest level" if self.refine_enabled and not self.at_finest else None
+
     def after_frame(self, frame: FrameInfo) -> ModelChange | None:
         """Feed one frame's measurement; refine when the level has settled (or used its time budget)."""
         m = frame.measurement

@@ -20,6 +20,7 @@ from .diagnostics import Diagnostics, Measurement
 from .errors import BlowUpError
 from .frame import FrameSnapshot, SceneLayout
 from .normals import VertexNormals
+from .rest import RestMonitor
 from .stability import stable_dt
 from .summary import RunSummary
 
@@ -48,7 +49,12 @@ class Scene:
         self.controllers = list(parts.controllers)
         self.max_speed, self.max_strain = parts.max_speed, parts.max_strain
         self.warnings: list[str] = list(parts.warnings)
-        self.diagnostics = Diagnostics(self.model, self.state, self.forces)
+        d = self.model.data
+        weight = float(d.mass.sum()) * max(float(np.linalg.norm(self.forces.gravity_value)), 9.81)
+        size = float(np.linalg.norm(np.ptp(d.positions, axis=0)))
+        self.rest = RestMonitor(parts.rest, weight * size)  # when the cloth counts as at rest (taichi_cloth.rest)
+        self.stop_at_rest = parts.stop_at_rest  # Scene.run ends a run at rest (unless told otherwise)
+        self.diagnostics = Diagnostics(self.model, self.state, self.forces, parts.rest.p99_speed)
         self._normals: VertexNormals | None = parts.normals
         self.steps_taken = 0
         self.topology_version = 0  # counts the changes of the cloth's triangles
@@ -188,6 +194,8 @@ class Scene:
             self.clock.model_changed(change.dt_scale)
             if change.refills:
                 self.integrator.topology_changed(change.level)
+                self.diagnostics.forget()  # other particles: no motion to measure against
+                self.rest.reset()
             for hook in self._model_changed:
                 hook(change, self.state.t, self.clock.dt)
         if change.topology:
@@ -207,6 +215,8 @@ class Scene:
         for c in self.controllers:
             self.apply(c.reset())
         self.clock.reset()
+        self.diagnostics.forget()
+        self.rest.reset()
         self._notes.clear()
 
     # ------------------------------------------------------------------ reading
@@ -275,11 +285,14 @@ class Scene:
 
     # ------------------------------------------------------------------ the loop
     def run(self, frames: int, recorder=None, entity: str | None = None, progress: bool = True,
-            record_every: int = 1, translation=None) -> RunSummary:
-        """Run `frames` frames of 1/fps. With a Recorder, log the cloth under `entity` (default "cloth", displaced
-        by `translation` [m] in the viewer) at frame 0, after every `record_every`-th frame, the last, and every
-        frame where something happened. A BlowUpError propagates after the frames so far are recorded; the summary
-        is attached to it as `.summary`."""
+            record_every: int = 1, translation=None, until_rest: bool | None = None) -> RunSummary:
+        """Run `frames` frames of 1/fps, or, with `until_rest` (default: the scene's rest stop option), until the
+        first frame at which the cloth is at rest by the scene's RestCriterion (at most `frames`). With a Recorder,
+        log the cloth under `entity` (default "cloth", displaced by `translation` [m] in the viewer) at frame 0,
+        after every `record_every`-th frame, the last, and every frame where something happened. A BlowUpError
+        propagates after the frames so far are recorded; the summary is attached to it as `.summary`. The summary
+        says whether and since when the cloth is at rest."""
+        until_rest = self.stop_at_rest if until_rest is None else bool(until_rest)
         if frames < 0:
             raise ValueError("frames must be >= 0")
         summary = RunSummary(self.name, self.integrator.name, self.clock.dt, self.clock.auto,
@@ -303,9 +316,16 @@ class Scene:
                         self.apply(change)
                         m = self.measure()
                 summary.measured(m)
-                log.frame(self, frame, m, n / elapsed if elapsed > 0 else None, self.topology_version != version)
+                busy = next((c.busy for c in self.controllers if c.busy), None)
+                rest = self.rest.observe(self.state.t, m, busy)
+                stop = until_rest and rest.at_rest
+                log.frame(self, frame, m, n / elapsed if elapsed > 0 else None, self.topology_version != version,
+                          last=stop)
                 if bar is not None:
                     bar.update(1)
+                if stop:
+                    summary.stopped_at_rest = True
+                    break
         except BlowUpError as err:
             summary.blew_up(frame, err)
             log.blow_up(self, frame, err)
@@ -321,6 +341,8 @@ class Scene:
                 summary.stats = {f"{k} per step": (v - stats_start.get(k, 0)) / summary.steps
                                  for k, v in self._stats().items()}
             summary.steps_line = self.clock.describe(summary.dt_min, summary.dt_max, counters)
+            if self.rest.status is not None:
+                summary.rest = self.rest.status.describe(self.rest.criterion)
             log.flush()
         return summary
 
@@ -367,9 +389,10 @@ class _FrameLog:
             self.recorder.begin_cloth(self.entity, scene.layout(), translation)
             self.recorder.log_frame(self.entity, scene.snapshot(0, scene.measure(), events=events))
 
-    def frame(self, scene: Scene, frame: int, m: Measurement, steps_per_s: float | None, new_topology: bool) -> None:
+    def frame(self, scene: Scene, frame: int, m: Measurement, steps_per_s: float | None, new_topology: bool,
+              last: bool = False) -> None:
         events = scene._collect(self.summary)
-        due = frame % self.every == 0 or frame == self.frames or events or new_topology
+        due = frame % self.every == 0 or frame == self.frames or last or events or new_topology
         if self.recorder is not None and due:
             t0 = time.perf_counter()
             self.recorder.log_frame(self.entity, scene.snapshot(frame, m, steps_per_s, events))

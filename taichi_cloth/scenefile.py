@@ -67,6 +67,9 @@ and a component whose table is absent is never built. The schema (units in brack
                                   # "during": it starts on the shipped body and morphs over morph_time [s] = 1.0
                                   # (after the seams are joined, for a garment), the cloth following it
     tolerance = 0.001             # [m] how close each girth must come; needs a [[colliders]] mesh "mannequin"
+    [rest]                        # when the cloth is at rest: every particle under max_speed [m/s] = 0.005, 99 %
+                                  # under p99_speed = 0.001, energy not rising over window [s] = 1.0; stop = true
+                                  # ends the run there (as `run --until-rest`; frames is then the most it runs)
     [output]                      # dir = "out", record = true, mesh = true, record_every = 1
 """
 from __future__ import annotations
@@ -156,6 +159,8 @@ SCHEMA = Table({
     "body": Table({**{g: Field("number", None, positive) for g in BODY_GIRTHS},
                    "morph": Field("str", "before", choices=("before", "during")),
                    "morph_time": Field("number", 1.0, positive), "tolerance": Field("number", 1e-3, positive)}),
+    "rest": Table({"stop": Field("bool", False), "max_speed": Field("number", 5e-3, positive),
+                   "p99_speed": Field("number", 1e-3, positive), "window": Field("number", 1.0, positive)}),
     "output": Table({"dir": Field("str", "out"), "record": Field("bool", True), "mesh": Field("bool", True),
                      "record_every": Field("int", 1, at_least(1))}, always=True),
 })
@@ -303,7 +308,7 @@ def build_scene(cfg: dict) -> Scene:
                      stretch_limit=cfg.get("stretch_limit"), colliders=colliders, body_morph=body_morph,
                      self_collision=cfg["self_collision"], fps=cfg["fps"], multilevel=_schedule(cfg.get("multilevel")),
                      sewing=_sewing(cfg.get("sewing"), cloth_cfg), precision=cfg["precision"], step_guard=guard,
-                     base_dir=cfg["_base_dir"])
+                     rest=cfg.get("rest"), base_dir=cfg["_base_dir"])
     except SceneError as exc:
         raise SceneError(f"{label}: {exc}") from None
     except ValueError as exc:  # a component refused its parameters

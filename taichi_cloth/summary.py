@@ -30,6 +30,8 @@ class RunSummary:
     wall_step: float = 0.0
     timed_steps: int = 0
     wall_record: float = 0.0
+    rest: str | None = None  # the rest criterion at the last frame (taichi_cloth.rest), in words
+    stopped_at_rest: bool = False  # the run ended early because the cloth was at rest
     first_frame_wall: float = 0.0
     final: Measurement | None = None
     max_strain_seen: float = 0.0
@@ -102,6 +104,8 @@ class RunSummary:
                          f"(elastic {f.elastic:.4g}, gravity {f.gravity:.4g}), total {f.total:.4g} J")
             lines.append(f"  max strain: {100 * f.max_strain:.2f} % now, {100 * self.max_strain_seen:.2f} % peak; "
                          f"max speed {f.max_speed:.3g} m/s")
+        if self.rest is not None:
+            lines.append(f"  {self.rest}" + ("; the run stopped there" if self.stopped_at_rest else ""))
         for e in self.events:
             lines.append(f"  {e}")
         for k, v in self.stats.items():

@@ -38,8 +38,8 @@ class PieceQuality:
 @dataclass
 class GarmentQuality:
     """pieces: PieceQuality list; seam_gap_max / seam_gap_mean [m]; penetrations: particles inside the body
-    (None without a body collider); max_speed [m/s]; static: the drape reached static equilibrium (max speed
-    below `static_speed` and the energy settled); notes: what the table cannot show (open seams...)."""
+    (None without a body collider); max_speed [m/s]; static: the drape is at rest by the scene's rest criterion
+    (taichi_cloth.rest); notes: what the table cannot show (open seams...)."""
 
     pieces: list
     seam_gap_max: float
@@ -95,9 +95,10 @@ def piece_quality(garment, current_of: np.ndarray, x: np.ndarray) -> list[PieceQ
     return out
 
 
-def garment_quality(scene, static_speed: float = 0.01) -> GarmentQuality:
+def garment_quality(scene) -> GarmentQuality:
     """The GarmentQuality of a garment scene now. Penetrations count particles whose signed distance to a mesh
-    collider (the body) is negative; static: max speed below `static_speed` [m/s] with the sewing finished."""
+    collider (the body) is negative; static: the scene's rest criterion held at its last frame (taichi_cloth.rest:
+    the same test as `run --until-rest`); when it did not, the notes say why."""
     sewing = scene.controller("sewing")
     if sewing is None:
         raise ValueError("garment_quality needs a garment scene (its cloth a GarmentCloth)")
@@ -112,7 +113,10 @@ def garment_quality(scene, static_speed: float = 0.01) -> GarmentQuality:
     if sewing.active or sewing.gave_up:
         opened = sewing.open_seams(gaps)
         notes.append("seams still open: " + (", ".join(f"{k} ({1e3 * v:.1f} mm)" for k, v in opened.items()) or "none"))
-    static = (not sewing.active) and m.max_speed < static_speed
+    status = scene.rest.status
+    static = status is not None and status.at_rest
+    if status is not None and not static:
+        notes.append(status.describe(scene.rest.criterion))
     return GarmentQuality(pieces, float(gaps.max()) if len(gaps) else 0.0, float(gaps.mean()) if len(gaps) else 0.0,
                           penetrations, m.max_speed, static, notes)
 

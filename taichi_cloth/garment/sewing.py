@@ -207,6 +207,10 @@ class Sewing(Controller):
     def layout(self, layout) -> None:
         layout.series["seam_gap"] = ["max [mm]", "mean [mm]"]
 
+    @property
+    def busy(self) -> str | None:
+        return "sewing" if self.active else None
+
     def record(self, frame) -> None:
         gaps = self.gaps(frame.positions.astype(np.float64))
         frame.scalars["seam_gap"] = [1e3 * gaps.max(), 1e3 * gaps.mean()] if len(gaps) else [0.0, 0.0]

@@ -1,0 +1,103 @@
+"""When a drape is at rest (taichi_cloth.rest): the criterion's rules, a sheet on the floor that a run stops on, the
+[rest] table of a scene file and `run --until-rest`."""
+import math
+
+import numpy as np
+import pytest
+
+import taichi_cloth as tc
+from taichi_cloth.diagnostics import Measurement
+from taichi_cloth.rest import RestCriterion, RestMonitor
+
+FLOOR = {"type": "plane", "point": [0.0, 0.0, 0.0], "normal": [0.0, 1.0, 0.0], "friction": 0.5}
+
+
+def frame(total=1.0, motion=1e-4, fast=0.0, speed=1e-4):
+    """A Measurement whose total energy is `total` [J] (all gravity), fastest motion `motion` and velocity `speed`
+    [m/s], `fast` the fraction of particles above the p99 speed."""
+    return Measurement(0.0, 0.0, total, 0.0, speed, 0, motion, fast)
+
+
+def test_the_criterion_needs_slow_particles_a_covered_window_no_energy_rise_and_idle_controllers():
+    c = RestCriterion(max_speed=5e-3, p99_speed=1e-3, window=1.0, energy_tolerance=1e-6)
+    mon = RestMonitor(c, energy_scale=1.0)  # the tolerance: 1e-6 J
+    times = np.arange(0, 61) / 60
+    for t in times[:60]:  # 59/60 s observed: the window is not covered yet
+        status = mon.observe(t, frame())
+        assert not status.at_rest and status.energy_rise is None
+    assert "less than 1 s observed" in status.describe(c)
+    status = mon.observe(times[60], frame())
+    assert status.at_rest and status.since == pytest.approx(1.0)
+    assert mon.observe(61 / 60, frame()).since == pytest.approx(1.0)  # rest goes on: since stays
+    # each rule alone breaks rest, and says so
+    for m, busy, words in [(frame(motion=6e-3), None, "fastest particle 6 mm/s"),
+                           (frame(speed=7e-3), None, "largest velocity 7 mm/s"),
+                           (frame(fast=0.02), None, "2 % of the particles above 1 mm/s"),
+                           (frame(total=1.0 + 2e-6), None, "energy rose 2e-06 J"),
+                           (frame(), "sewing", "sewing not finished")]:
+        probe = RestMonitor(c, energy_scale=1.0)
+        for t in times[:60]:
+            probe.observe(t, frame())
+        status = probe.observe(1.0, m, busy)
+        assert not status.at_rest and status.since is None
+        assert words in status.describe(c), status.describe(c)
+    # a rise within the tolerance is round-off; a fall is always fine
+    probe = RestMonitor(c, energy_scale=1.0)
+    for t in times:
+        status = probe.observe(t, frame(total=1.0 + (5e-7 if t > 0.5 else 0.0) - t * 1e-3))
+    assert status.at_rest
+    mon.reset()
+    assert mon.status is None and not mon.observe(2.0, frame()).at_rest
+
+
+@pytest.mark.parametrize("bad, words", [({"max_speed": 0.0}, "max_speed must be a positive number"),
+                                        ({"p99_speed": 0.01}, "must not exceed max_speed"),
+                                        ({"window": math.inf}, "window must be a positive number")])
+def test_an_impossible_criterion_is_refused(bad, words):
+    with pytest.raises(ValueError, match=words):
+        RestCriterion(**bad)
+
+
+def floor_sheet(**options):
+    cloth = tc.ClothBuilder.grid((0.3, 0.3), (8, 8), "cotton", center=(0.0, 0.03, 0.0), plane="xz")
+    return tc.Scene(cloth, dt=1 / 120, air_damping=0.5, colliders=[FLOOR], **options)
+
+
+def test_a_sheet_dropped_on_the_floor_comes_to_rest_and_the_run_stops_there():
+    sc = floor_sheet()
+    summary = sc.run(600, progress=False, until_rest=True)
+    assert summary.stopped_at_rest and summary.frames < 600
+    status = sc.rest.status
+    assert status.at_rest and status.since == pytest.approx(sc.state.t)
+    assert status.since >= 1.0  # the window of one second had to be observed first
+    m = sc.measure()
+    assert m.max_speed < 5e-3 and m.motion_speed < 5e-3
+    assert np.all(sc.positions()[:, 1] > 0)  # on the floor, not through it
+    assert f"at rest since t = {status.since:.3f} s" in summary.format()
+    assert "the run stopped there" in summary.format()
+    # without until_rest the run goes on to its last frame, and still says the cloth is at rest
+    more = sc.run(30, progress=False)
+    assert more.frames == 30 and not more.stopped_at_rest and "at rest since" in more.format()
+
+
+def test_the_scene_file_rest_table_and_the_cli_flag(tmp_path, capsys):
+    from taichi_cloth.cli import main
+
+    base = {"name": "floor", "frames": 400, "cloth": {"grid": {"size": [0.3, 0.3], "resolution": [8, 8],
+                                                              "center": [0.0, 0.03, 0.0], "plane": "xz"}},
+            "integrator": {"name": "implicit", "dt": 1 / 120}, "air_damping": 0.5, "colliders": [FLOOR]}
+    loaded = tc.load_scene({**base, "rest": {"stop": True, "max_speed": 0.01, "window": 0.5}})
+    assert loaded.scene.stop_at_rest and loaded.scene.rest.criterion == RestCriterion(max_speed=0.01, window=0.5)
+    with pytest.raises(tc.SceneError, match="p99_speed .* must not exceed max_speed"):
+        tc.load_scene({**base, "rest": {"max_speed": 1e-3, "p99_speed": 2e-3}})
+    with pytest.raises(tc.SceneError, match=r"\[rest\]: unknown key 'speed'"):
+        tc.load_scene({**base, "rest": {"speed": 1e-3}})
+    path = tmp_path / "floor.toml"
+    path.write_text('name = "floor"\nframes = 400\nair_damping = 0.5\n[cloth.grid]\nsize = [0.3, 0.3]\n'
+                    'resolution = [8, 8]\ncenter = [0.0, 0.03, 0.0]\nplane = "xz"\n[integrator]\nname = "implicit"\n'
+                    'dt = 0.008333333\n[[colliders]]\ntype = "plane"\npoint = [0, 0, 0]\nnormal = [0, 1, 0]\n'
+                    'friction = 0.5\n[output]\nmesh = false\n')
+    assert main(["run", str(path), "--until-rest", "--no-progress", "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    ran = int(out.split("ran ")[1].split(" frames")[0])
+    assert ran < 400 and "the run stopped there" in out
