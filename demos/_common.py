@@ -30,9 +30,12 @@ def arguments(doc: str, argv=None, extra=None) -> argparse.Namespace:
 
 
 def load(scene_file, args):
-    """tc.load_scene with the demo's command-line overrides."""
-    return tc.load_scene(scene_file, frames=args.frames, integrator=args.integrator, dt=args.dt,
-                         precision=args.precision, quality=args.quality, out=args.out)
+    """tc.load_scene with the demo's command-line overrides (--until-rest: the scene's runs end at rest)."""
+    loaded = tc.load_scene(scene_file, frames=args.frames, integrator=args.integrator, dt=args.dt,
+                           precision=args.precision, quality=args.quality, out=args.out)
+    if getattr(args, "until_rest", False):
+        loaded.scene.stop_at_rest = True
+    return loaded
 
 
 def opened_with(path) -> str:
