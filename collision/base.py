@@ -10,14 +10,18 @@ class ParticleCollider:
     serial = False
 
     """Base of the colliders. After `attach`, x, v [m, m/s] and inv_mass [1/kg] are the cloth's (P,) fields,
-    n_particles its 0-d live count, x_start (P,) the positions at the start of the step, and contact_normal
-    (optional (P,) vec3 field) receives the unit normal of each contact made, for the implicit integrators."""
+    n_particles its 0-d live count, x_start (P,) the positions at the start of the step, and contact_normal,
+    contact_friction (optional (P,) fields) receive the unit normal and the friction coefficient of each contact
+    made, for the implicit integrators (record_contact)."""
 
-    def attach(self, x, v, inv_mass, n_particles, contact_normal=None, serial: bool = False) -> None:
+    def attach(self, x, v, inv_mass, n_particles, contact_normal=None, serial: bool = False,
+               contact_friction=None) -> None:
         self.x, self.v, self.inv_mass, self.n_particles = x, v, inv_mass, n_particles
         self.serial = bool(serial)
         self.contact_normal = contact_normal
+        self.contact_friction = contact_friction
         self.records_contacts = contact_normal is not None
+        self.records_friction = contact_friction is not None
         blk = FieldBlock()
         self.x_start = blk.vector(3, x.dtype, x.shape[0])
         blk.finalize(self)
@@ -37,6 +41,15 @@ class ParticleCollider:
         ti.loop_config(serialize=self.serial)
         for i in range(self.n_particles[None]):
             self.x_start[i] = self.x[i]
+
+    @ti.func
+    def record_contact(self, i, normal, friction):
+        """Hand the contact of particle i (unit `normal`, Coulomb `friction`) to the implicit integrators (nothing
+        when the scene has none)."""
+        if ti.static(self.records_contacts):
+            self.contact_normal[i] = normal
+            if ti.static(self.records_friction):
+                self.contact_friction[i] = friction
 
     @ti.func
     def respond(self, i, normal, reference_velocity, friction):

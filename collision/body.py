@@ -230,7 +230,7 @@ class MeshCollider(ParticleCollider):
         v0, v1, v2 = self._corners(t)
         nrm = self.normals[t]
         plane = (qf - v0).dot(nrm)
-        tau = ti.cast(self.thickness, ti.f32)
+        tau = 2 * ti.cast(self.thickness, ti.f32)  # the contact band: twice the thickness (pushed below one)
         # the gap is at least the plane distance: far planes are culled before the closest-point computation
         if plane < tau and plane > -reach:
             gap = plane
@@ -246,7 +246,7 @@ class MeshCollider(ParticleCollider):
 
     @ti.func
     def _nearest_contact(self, i, n, q, reach):
-        """Among the n candidates, the closest one within the thickness of q (and at most `reach` inside):
+        """Among the n candidates, the closest one within twice the thickness of q (and at most `reach` inside):
         (triangle or -1, signed gap [m], push direction)."""
         qf = ti.cast(q, ti.f32)
         best, best_gap, best_dir = -1, ti.cast(1e30, ti.f32), ti.Vector.zero(ti.f32, 3)
@@ -288,17 +288,20 @@ class MeshCollider(ParticleCollider):
                         a, b, c = self._corners(hit)
                         direction = self.normals[hit]
                         push = (ti.cast(thickness, ti.f32) - (ti.cast(q, ti.f32) - a).dot(direction)) * direction
-                    elif near >= 0:
+                    elif near >= 0 and gap < ti.cast(thickness, ti.f32):
                         # too close: away from the closest point of the surface, to the thickness
                         contacts += 1
                         push = (ti.cast(thickness, ti.f32) - gap) * direction
+                    elif near >= 0:
+                        # within the contact band: a contact for the solve (its friction), nothing to push
+                        self.record_contact(i, ti.cast(direction, self.x.dtype), ti.cast(friction, self.x.dtype))
+                        break
                     else:
                         break
                     nrm = ti.cast(direction, self.x.dtype)
                     self.x[i] = q + ti.cast(push, self.x.dtype)
                     crossed = hit >= 0
-                    if ti.static(self.records_contacts):
-                        self.contact_normal[i] = nrm
+                    self.record_contact(i, nrm, ti.cast(friction, self.x.dtype))
                     self.respond(i, nrm, ti.Vector.zero(self.x.dtype, 3), ti.cast(friction, self.x.dtype))
                     if not crossed:
                         break  # a proximity push is local: only a crossing response needs checking again

@@ -112,6 +112,7 @@ class PrimitiveColliders(ParticleCollider):
                 axis = _closest_on_segment(0.5 * (p + q), a, self.capsule_b[k])
                 q = self._entry(p, q, axis, self.capsule_a[k].w + rp)
             push = ti.Vector.zero(ti.f32, 3)
+            band = ti.Vector.zero(ti.f32, 3)  # outward directions of the shapes within the contact band
             for k in range(self.n_spheres):  # Zhang et al. 2017: pushes summed over all spheres
                 c = self.sphere[k].xyz
                 reach = self.sphere[k].w + rp
@@ -119,6 +120,8 @@ class PrimitiveColliders(ParticleCollider):
                 dist = d.norm()
                 if dist <= reach:
                     push += self.alpha * (reach - dist) * d.normalized(1e-20)
+                if dist <= reach + rp:
+                    band += d.normalized(1e-20)
             for k in range(self.n_capsules):
                 c = _closest_on_segment(q, self.capsule_a[k].xyz, self.capsule_b[k])
                 reach = self.capsule_a[k].w + rp
@@ -126,20 +129,26 @@ class PrimitiveColliders(ParticleCollider):
                 dist = d.norm()
                 if dist <= reach:
                     push += self.alpha * (reach - dist) * d.normalized(1e-20)
+                if dist <= reach + rp:
+                    band += d.normalized(1e-20)
             for k in range(self.n_planes):
                 pt = ti.Vector([self.plane[k][0], self.plane[k][1], self.plane[k][2]])
                 nrm = ti.Vector([self.plane[k][3], self.plane[k][4], self.plane[k][5]])
                 dist = (q + push - pt).dot(nrm)
                 if dist < rp:
                     push += (rp - dist) * nrm
+                if dist < 2 * rp:
+                    band += nrm
             moved = (q + push) - ti.cast(self.x[i], ti.f32)
+            friction = ti.cast(self.friction, self.x.dtype)
             if push.norm() > 0 or moved.norm() > 0:
                 self.x[i] = ti.cast(q + push, self.x.dtype)
                 nrm = ti.cast(push.normalized(1e-20), self.x.dtype)
-                if ti.static(self.records_contacts):
-                    if push.norm() > 0:
-                        self.contact_normal[i] = nrm
-                self.respond(i, nrm, ti.Vector.zero(self.x.dtype, 3), ti.cast(self.friction, self.x.dtype))
+                if push.norm() > 0:
+                    self.record_contact(i, nrm, friction)
+                self.respond(i, nrm, ti.Vector.zero(self.x.dtype, 3), friction)
+            elif band.norm() > 0:  # resting just above a surface: a contact for the solve, nothing to undo
+                self.record_contact(i, ti.cast(band.normalized(1e-20), self.x.dtype), friction)
 
     def signed_distance(self, points) -> np.ndarray:
         """Signed distance [m] of points (N,3) to the union of the shapes, negative inside."""

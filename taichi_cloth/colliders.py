@@ -97,7 +97,8 @@ class Colliders(Controller):
         self.objects, self.contacts = list(objects), contacts
         self.moving: set[int] = set()
         for c in self.objects:
-            c.attach(state.x, state.v, model.inv_mass, model.n_particles, contacts.normal, model.serial)
+            c.attach(state.x, state.v, model.inv_mass, model.n_particles, contacts.normal, model.serial,
+                     contacts.friction)
 
     @property
     def thickness(self) -> float | None:

@@ -1,11 +1,14 @@
 """Contact normals shared between the colliders and the implicit integrators.
 
-The colliders write, for each particle they pushed out in the last step, the unit normal of that contact.
-The implicit integrators then constrain the particle's normal velocity change inside their solve (the
+The colliders write, for each particle they pushed out in the last step or left within the contact band (up to
+twice the collider's thickness from the surface), the unit normal of that contact and the collider's friction
+coefficient. The implicit integrators then constrain the particle's normal velocity change inside their solve (the
 constraint filter S_i = I - n n^T of Baraff and Witkin 1998, section 5.3): without it the solve, unaware of
 the body, lets a particle's falling neighbours drag it into the body every step, the projection puts it
 back, and the cloth stretches around every contact (we measured 30-260 % strain on a 10 cm ball at
-h = 1/120 s; with the filter it stays at a few per cent). Built only when a scene has colliders.
+h = 1/120 s; with the filter it stays at a few per cent). The implicit integrator also decides, before its solve,
+which contacts stick (static friction: the particle is held, S_i = 0) from the force that presses them on the body
+(taichi_cloth.integrators.implicit). Built only when a scene has colliders.
 """
 import taichi as ti
 
@@ -14,12 +17,16 @@ from clothbase.fields import FieldBlock
 
 @ti.data_oriented
 class Contacts:
-    """normal: (P,) vec3 fp, the unit contact normal of each particle touched in the last step (0 if none)."""
+    """normal: (P,) vec3 fp, the unit contact normal of each particle touched in the last step (0 if none);
+    friction: (P,) fp, the Coulomb coefficient of that contact; stuck: (P,) i32, 1 where the integrator holds the
+    particle by static friction this step (every direction filtered)."""
 
     def __init__(self, model):
         self.model = model
         blk = FieldBlock()
         self.normal = blk.vector(3, model.fp, model.capacity[0])
+        self.friction = blk.scalar(model.fp, model.capacity[0])
+        self.stuck = blk.scalar(ti.i32, model.capacity[0])
         blk.finalize(self)
 
     @ti.kernel
@@ -30,10 +37,13 @@ class Contacts:
 
     @ti.func
     def filter(self, i, vec):
-        """vec without its component along particle i's contact normal (vec itself when i is not in contact)."""
+        """vec without its component along particle i's contact normal (vec itself when i is not in contact, 0
+        when it is stuck)."""
         n = self.normal[i]
         out = vec
         nn = n.dot(n)
-        if nn > 0:  # divided by |n|^2: a normal written in float32 is unit only to 1e-7, and S must be a projector
+        if self.stuck[i] != 0:
+            out = vec * 0
+        elif nn > 0:  # divided by |n|^2: a normal written in float32 is unit only to 1e-7, and S must be a projector
             out = vec - vec.dot(n) / nn * n
         return out

@@ -32,8 +32,11 @@ def sheet_on_a_ball(preconditioner: str, tolerance: float = 1e-12, levels: int =
 
 def filtered_solve(sc) -> np.ndarray:
     """dv of the first Newton iteration of a backward-Euler step of `sc` now (the Baraff-Witkin system), by scipy:
-    the free directions Q (pins: none, contacts: the two tangents), dv = Q (Q^T A Q)^-1 Q^T b, with A and b built
-    from the formulas, not from the engine's kernels."""
+    the free directions Q (pins and contacts held by static friction: none, other contacts: the two tangents),
+    dv = Q (Q^T A Q)^-1 Q^T b, with A and b built from the formulas, not from the engine's kernels. The step's
+    friction, which changes velocities before the solve, is applied first (by the engine) and switched off for the
+    step itself (solve_after_friction)."""
+    sc.integrator._contact_friction(sc.dt)
     d = sc.model.data
     x, v = sc.positions(), sc.velocities()
     f, _ = spring_forces(d, x, v)
@@ -44,9 +47,10 @@ def filtered_solve(sc) -> np.ndarray:
     A = np.diag(np.repeat(d.mass, 3) * (1 + H * GAMMA)) + H * D + H * H * K
     rhs = H * f.reshape(-1) - H * H * K @ v.reshape(-1)
     normals = sc.state.contacts.normal.to_numpy()[: d.n_particles]
+    stuck = sc.state.contacts.stuck.to_numpy()[: d.n_particles] != 0
     columns = []
     for i in range(d.n_particles):
-        if sc.model.pinned[i]:
+        if sc.model.pinned[i] or stuck[i]:
             continue
         n = normals[i]
         if n @ n > 0:
@@ -64,6 +68,16 @@ def filtered_solve(sc) -> np.ndarray:
     return (Q @ y).reshape(-1, 3)
 
 
+def solve_after_friction(sc) -> None:
+    """One step of the integrator alone (the collider would change v afterwards), its friction already applied by
+    filtered_solve."""
+    sc.integrator._contact_friction = lambda dt: None
+    try:
+        sc.integrator.step(sc.dt)
+    finally:
+        del sc.integrator._contact_friction
+
+
 @pytest.mark.parametrize("preconditioner", ["multigrid", "jacobi"])
 def test_a_step_equals_the_direct_solve_of_the_filtered_system(preconditioner):
     sc = sheet_on_a_ball(preconditioner, newton_iterations=1, line_search=False)
@@ -71,8 +85,10 @@ def test_a_step_equals_the_direct_solve_of_the_filtered_system(preconditioner):
     touching = np.linalg.norm(sc.state.contacts.normal.to_numpy()[: sc.model.data.n_particles], axis=1) > 0
     assert 4 < touching.sum() < sc.model.data.n_particles - 10  # some particles on the ball, most free
     expected = filtered_solve(sc)
+    stuck = sc.state.contacts.stuck.to_numpy()[: sc.model.data.n_particles] != 0
+    assert stuck.sum() >= 1 and (touching & ~stuck).sum() >= 4  # held by static friction, and sliding
     v = sc.velocities()
-    sc.integrator.step(sc.dt)  # the integrator alone: the collider would change v afterwards
+    solve_after_friction(sc)
     np.testing.assert_allclose(sc.velocities() - v, expected, rtol=0, atol=1e-9 * np.abs(expected).max())
     assert (sc.integrator.multigrid is not None) == (preconditioner == "multigrid")
 
@@ -198,7 +214,7 @@ def test_a_step_of_a_sewn_garment_equals_the_direct_solve(preconditioner):
         assert mg is None
     expected = filtered_solve(sc)
     v = sc.velocities()
-    sc.integrator.step(sc.dt)
+    solve_after_friction(sc)
     np.testing.assert_allclose(sc.velocities() - v, expected, rtol=0, atol=1e-9 * np.abs(expected).max())
 
 

@@ -187,6 +187,8 @@ class Implicit(Integrator):
     def _advance(self, dt: float) -> None:
         tol2 = self.options["cg_tolerance"] ** 2
         h_gamma = dt * self.forces.air_damping_value
+        if self.has_contacts:
+            self._contact_friction(dt)  # before the step's start is kept: it changes velocities
         self._begin()
         its, unconverged, residual, first_decrement = 0, 0, 0.0, None
         budget = self.options["cg_max_iterations"]  # per step: a further Newton iteration spends what is left
@@ -249,6 +251,48 @@ class Implicit(Integrator):
             q = self.contact_filter(i, m.mass[i] * mass_scale * self.p[i] + self._product(i, self.p))
         self.q[i] = q
         return ti.cast(self.p[i].dot(q), ti.f64)
+
+    @ti.kernel
+    def _contact_friction(self, dt: ti.f64):
+        """Coulomb friction at the contacts of the last step, before the solve (Baraff and Witkin 1998, section 5:
+        the constraint decides what the solve may change). For a particle with a contact normal n and the force f on
+        it now (springs, gravity, drag, sources), f_n = -f.n presses it on the body:
+          * f_n <= 0 and not moving in: released (no constraint this step);
+          * else its velocity into the body is removed, and friction can take up to dv = mu f_n h / m of its
+            tangential velocity in this step: where that stops it and the tangential force is within the friction
+            cone (|f_t| <= mu f_n), it sticks (held where it is: every direction filtered, v = its normal part);
+            otherwise it slides (its normal direction filtered), its tangential velocity reduced by dv.
+        The velocities change in a second pass, after every force was read at the old ones."""
+        m, s, c = self.model, self.state, self.contacts
+        h = ti.cast(dt, m.fp)
+        ti.loop_config(serialize=self.model.serial)
+        for i in range(m.n_particles[None]):
+            n = c.normal[i]
+            v = s.v[i]
+            stuck = 0
+            if m.inv_mass[i] != 0 and n.dot(n) > 0:
+                n = n.normalized()
+                f = self.forces.particle_force(i, True)
+                fn = -f.dot(n)
+                vn = v.dot(n)
+                if fn <= 0 and vn >= 0:
+                    c.normal[i] = ti.Vector.zero(m.fp, 3)  # pulled away: free
+                else:
+                    vt = v - vn * n
+                    ft = f + fn * n
+                    take = c.friction[i] * ti.max(fn, 0.0) * h * m.inv_mass[i]
+                    vn = ti.max(vn, 0.0)
+                    if vt.norm() <= take and ft.norm() <= c.friction[i] * fn:
+                        stuck = 1
+                        vt = ti.Vector.zero(m.fp, 3)
+                    else:
+                        vt *= ti.max(0.0, 1.0 - take / ti.max(vt.norm(), 1e-30))
+                    v = vt + vn * n
+            self.q[i] = v  # scratch: the new velocity
+            c.stuck[i] = stuck
+        ti.loop_config(serialize=self.model.serial)
+        for i in range(m.n_particles[None]):
+            s.v[i] = self.q[i]
 
     @ti.kernel
     def _begin(self):
