@@ -3,6 +3,10 @@ import taichi as ti
 
 from clothbase.fields import FieldBlock
 
+#: a particle up to this fraction of a collider's thickness beyond it still counts as in contact: it rests where
+#: the last push left it (recorded for the implicit integrators' friction, not pushed)
+BAND = 0.25
+
 
 @ti.data_oriented
 class ParticleCollider:

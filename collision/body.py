@@ -19,7 +19,7 @@ import taichi as ti
 from clothbase.fields import FieldBlock
 from clothbase.meshes import validate_triangle_mesh
 
-from .base import ParticleCollider
+from .base import BAND, ParticleCollider
 from .geometry import closest_point_on_triangle, collision_possibility, inside_triangle, segment_triangle, solid_angle
 from .grid import VoxelGrid
 
@@ -230,7 +230,7 @@ class MeshCollider(ParticleCollider):
         v0, v1, v2 = self._corners(t)
         nrm = self.normals[t]
         plane = (qf - v0).dot(nrm)
-        tau = 2 * ti.cast(self.thickness, ti.f32)  # the contact band: twice the thickness (pushed below one)
+        tau = (1 + BAND) * ti.cast(self.thickness, ti.f32)  # the contact band (pushed below the thickness)
         # the gap is at least the plane distance: far planes are culled before the closest-point computation
         if plane < tau and plane > -reach:
             gap = plane
@@ -246,7 +246,7 @@ class MeshCollider(ParticleCollider):
 
     @ti.func
     def _nearest_contact(self, i, n, q, reach):
-        """Among the n candidates, the closest one within twice the thickness of q (and at most `reach` inside):
+        """Among the n candidates, the closest one within (1 + BAND) x the thickness of q (at most `reach` inside):
         (triangle or -1, signed gap [m], push direction)."""
         qf = ti.cast(q, ti.f32)
         best, best_gap, best_dir = -1, ti.cast(1e30, ti.f32), ti.Vector.zero(ti.f32, 3)

@@ -12,7 +12,7 @@ import taichi as ti
 
 from clothbase.fields import FieldBlock
 
-from .base import ParticleCollider
+from .base import BAND, ParticleCollider
 
 
 @ti.func
@@ -120,7 +120,7 @@ class PrimitiveColliders(ParticleCollider):
                 dist = d.norm()
                 if dist <= reach:
                     push += self.alpha * (reach - dist) * d.normalized(1e-20)
-                if dist <= reach + rp:
+                if dist <= reach + BAND * rp:
                     band += d.normalized(1e-20)
             for k in range(self.n_capsules):
                 c = _closest_on_segment(q, self.capsule_a[k].xyz, self.capsule_b[k])
@@ -129,7 +129,7 @@ class PrimitiveColliders(ParticleCollider):
                 dist = d.norm()
                 if dist <= reach:
                     push += self.alpha * (reach - dist) * d.normalized(1e-20)
-                if dist <= reach + rp:
+                if dist <= reach + BAND * rp:
                     band += d.normalized(1e-20)
             for k in range(self.n_planes):
                 pt = ti.Vector([self.plane[k][0], self.plane[k][1], self.plane[k][2]])
@@ -137,7 +137,7 @@ class PrimitiveColliders(ParticleCollider):
                 dist = (q + push - pt).dot(nrm)
                 if dist < rp:
                     push += (rp - dist) * nrm
-                if dist < 2 * rp:
+                if dist < (1 + BAND) * rp:
                     band += nrm
             moved = (q + push) - ti.cast(self.x[i], ti.f32)
             friction = ti.cast(self.friction, self.x.dtype)

@@ -99,7 +99,7 @@ class Implicit(Integrator):
         self.spring_axial = blk.scalar(fp, S)         # h kd + h^2 k (1 - g)   [kg/s]
         self.spring_iso = blk.scalar(fp, S)           # h^2 k g                 [kg]
         self.b = blk.vector(3, fp, P)
-        self.inv_diag = blk.vector(3, fp, P)
+        self.inv_diag = blk.matrix(3, 3, fp, P)  # Jacobi: the inverse 3x3 diagonal blocks of the filtered A
         self.dv, self.r, self.z, self.p, self.q = (blk.vector(3, fp, P) for _ in range(5))
         self.x0, self.v0 = blk.vector(3, fp, P), blk.vector(3, fp, P)  # the step's start [m], [m/s]
         self.dv_total = blk.vector(3, fp, P)          # v_k - v0 [m/s] (after the step: its whole velocity change)
@@ -258,7 +258,7 @@ class Implicit(Integrator):
         the constraint decides what the solve may change). For a particle with a contact normal n and the force f on
         it now (springs, gravity, drag, sources), f_n = -f.n presses it on the body:
           * f_n <= 0 and not moving in: released (no constraint this step);
-          * else its velocity into the body is removed, and friction can take up to dv = mu f_n h / m of its
+          * else its normal velocity is removed (it rests on the body), and friction can take up to dv = mu f_n h / m of its
             tangential velocity in this step: where that stops it and the tangential force is within the friction
             cone (|f_t| <= mu f_n), it sticks (held where it is: every direction filtered, v = its normal part);
             otherwise it slides (its normal direction filtered), its tangential velocity reduced by dv.
@@ -280,14 +280,17 @@ class Implicit(Integrator):
                 else:
                     vt = v - vn * n
                     ft = f + fn * n
-                    take = c.friction[i] * ti.max(fn, 0.0) * h * m.inv_mass[i]
-                    vn = ti.max(vn, 0.0)
-                    if vt.norm() <= take and ft.norm() <= c.friction[i] * fn:
+                    mu = c.friction[i] * c.friction_scale[None]
+                    take = mu * ti.max(fn, 0.0) * h * m.inv_mass[i]
+                    if vt.norm() <= take and ft.norm() <= mu * fn:
                         stuck = 1
                         vt = ti.Vector.zero(m.fp, 3)
                     else:
                         vt *= ti.max(0.0, 1.0 - take / ti.max(vt.norm(), 1e-30))
-                    v = vt + vn * n
+                    # resting on the body: no normal velocity. An approaching one is removed; so is a leaving one, which
+                    # the filter would otherwise keep against the force that presses (the T-shirt at rest gained
+                    # 3e-5 J a step that way), and which freed would fall back and be pushed out every step
+                    v = vt
             self.q[i] = v  # scratch: the new velocity
             c.stuck[i] = stuck
         ti.loop_config(serialize=self.model.serial)
@@ -357,17 +360,21 @@ class Implicit(Integrator):
                 self.b[i] = zero
             else:
                 f = fm.particle_force(i, True)
-                diag = ti.Vector.one(m.fp, 3) * m.mass[i] * mass_scale
+                eye = ti.Matrix.identity(m.fp, 3)
+                diag = eye * m.mass[i] * mass_scale
                 kv = ti.Vector.zero(m.fp, 3)  # h^2 K v0 on the first iteration (K = -df/dx)
                 for e in range(m.adj_offset[i], m.adj_offset[i + 1]):
                     sp = m.adj_spring[e]
                     u = self.spring_u[sp]
-                    diag += self.spring_axial[sp] * u * u + self.spring_iso[sp]
+                    diag += self.spring_axial[sp] * u.outer_product(u) + self.spring_iso[sp] * eye
                     if first != 0:
                         dvel = s.v[i] - s.v[m.adj_other[e]]
                         kv += (self.spring_axial[sp] - h * m.damping[sp]) * u.dot(dvel) * u + self.spring_iso[sp] * dvel
                 self.b[i] = self.contact_filter(i, h * f - kv - m.mass[i] * self.dv_total[i])
-                self.inv_diag[i] = 1.0 / diag
+                # the block of the filtered system S A S + M' (I - S): on a contact the tangential block, whose
+                # inverse is not the per-axis one (block Jacobi took the T-shirt's CG from 143 to N iterations)
+                S = self.contact_projector(i)
+                self.inv_diag[i] = (S @ diag @ S + m.mass[i] * mass_scale * (eye - S)).inverse()
         delta = ti.cast(0.0, ti.f64)
         bz = ti.cast(0.0, ti.f64)  # b.D^-1 b: the tolerance is relative to b, so that a good start stops early
         ti.loop_config(serialize=self.model.serial)
@@ -381,10 +388,10 @@ class Implicit(Integrator):
                 r = self.b[i] - self.contact_filter(i, m.mass[i] * mass_scale * self.dv[i]
                                                     + self._product(i, self.dv))
                 self.r[i] = r
-                z = self.contact_filter(i, r * self.inv_diag[i])
+                z = self.contact_filter(i, self.inv_diag[i] @ r)
                 self.z[i] = z
                 delta += ti.cast(r.dot(z), ti.f64)
-                bz += ti.cast(self.b[i].dot(self.contact_filter(i, self.b[i] * self.inv_diag[i])), ti.f64)
+                bz += ti.cast(self.b[i].dot(self.contact_filter(i, self.inv_diag[i] @ self.b[i])), ti.f64)
         self.cg[self._DELTA] = delta
         self.cg[self._DELTA0] = bz
         self.cg[self._THRESH] = tol2 * bz
@@ -422,7 +429,7 @@ class Implicit(Integrator):
                     self.dv[i] += a * self.p[i]
                     r = self.r[i] - a * self.q[i]
                     self.r[i] = r
-                    z = self.contact_filter(i, r * self.inv_diag[i])
+                    z = self.contact_filter(i, self.inv_diag[i] @ r)
                     self.z[i] = z
                     delta_new += ti.cast(r.dot(z), ti.f64)
             if cg[self._ACTIVE] != 0:
@@ -583,9 +590,12 @@ class Implicit(Integrator):
         if alpha < 1.0:
             self.cut[None] += 1
         self.cg[self._DECREMENT] = -self.ip[NA + 1]  # the Newton decrement dv^T A dv [J]
-        # the rise of the total energy above the step's start, beyond the external forces' work and round-off
+        # the rise of the total energy above the step's start, beyond the external forces' work and round-off (the
+        # state is float32 or float64: a cloth at rest on a body rose by a few 1e-8 of its energy in float32 steps
+        # that change nothing, and each such step took a second Newton iteration)
         start = self.energy[NA + 1]
-        self.cg[self._RISE] = energy - start - ti.max(work, 0.0) - 1e-9 * ti.abs(start)
+        roundoff = ti.static(1e-6 if self.model.fp == ti.f32 else 1e-12)
+        self.cg[self._RISE] = energy - start - ti.max(work, 0.0) - roundoff * ti.abs(start)
         ti.loop_config(serialize=self.model.serial)
         for i in range(m.n_particles[None]):
             if m.inv_mass[i] != 0:
