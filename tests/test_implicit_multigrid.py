@@ -103,7 +103,7 @@ def test_multigrid_and_jacobi_give_the_same_step_and_multigrid_needs_far_fewer_i
     (xm, itm), (xj, itj) = steps["multigrid"], steps["jacobi"]
     # to a few float32 ulps: the ball pushes out in float32 (0.19 m has an ulp of 1.5e-8 m)
     np.testing.assert_allclose(xm, xj, rtol=0, atol=1e-7)
-    assert itm < 0.4 * itj, (itm, itj)  # 71 against 242 per Newton iteration (Jacobi warm-started)
+    assert itm < 0.6 * itj, (itm, itj)  # 48 against 87 over the 3 steps (block Jacobi on the filtered system)
 
 
 def test_a_v_cycle_is_symmetric_and_positive_on_the_free_rows():
