@@ -197,10 +197,13 @@ def test_fuzzy_ranking_finds_the_same_contacts_with_fewer_tests():
         sc.step(120)  # settles onto head and shoulders (deterministic: identical in both modes so far?)
         body.reset_counters()
         sc.step(30)
-        results[mode] = (sc.positions(), body.counter_values())
-    (x_exact, c_exact), (x_fuzzy, c_fuzzy) = results["exact"], results["fuzzy"]
+        touching = int((np.linalg.norm(sc.state.contacts.normal.to_numpy(), axis=1) > 0).sum())
+        results[mode] = (sc.positions(), body.counter_values(), touching)
+    (x_exact, c_exact, _), (x_fuzzy, c_fuzzy, _) = results["exact"], results["fuzzy"]
     assert np.abs(x_exact - x_fuzzy).max() < 1e-4
-    assert c_fuzzy["proximity_contacts"] > 100  # really resting on the body
+    # really resting on the body: in contact (pushed, or held where the last push left them). The 4 cm sheet tents
+    # from the head to the shoulders: about 20 particles lie within 1 cm of the body, 8-14 touch it
+    assert results["fuzzy"][2] >= 8
     assert c_fuzzy["crossing_tests"] <= c_exact["crossing_tests"]
     assert c_fuzzy["candidates"] >= 3 * c_fuzzy["crossing_tests"]
 
