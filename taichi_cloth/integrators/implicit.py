@@ -258,10 +258,10 @@ class Implicit(Integrator):
         the constraint decides what the solve may change). For a particle with a contact normal n and the force f on
         it now (springs, gravity, drag, sources), f_n = -f.n presses it on the body:
           * f_n <= 0 and not moving in: released (no constraint this step);
-          * else its normal velocity is removed (it rests on the body), and friction can take up to dv = mu f_n h / m of its
-            tangential velocity in this step: where that stops it and the tangential force is within the friction
-            cone (|f_t| <= mu f_n), it sticks (held where it is: every direction filtered, v = its normal part);
-            otherwise it slides (its normal direction filtered), its tangential velocity reduced by dv.
+          * else its normal velocity is removed (it rests on the body), and friction can take up to
+            dv = mu f_n h / m of its tangential velocity in this step: where that stops it and the tangential force
+            is within the friction cone (|f_t| <= mu f_n), it sticks (held where it is: every direction filtered,
+            v = 0); otherwise it slides (its normal direction filtered), its tangential velocity reduced by dv.
         The velocities change in a second pass, after every force was read at the old ones."""
         m, s, c = self.model, self.state, self.contacts
         h = ti.cast(dt, m.fp)
