@@ -54,7 +54,8 @@ class Scene:
         size = float(np.linalg.norm(np.ptp(d.positions, axis=0)))
         self.rest = RestMonitor(parts.rest, weight * size)  # when the cloth counts as at rest (taichi_cloth.rest)
         self.stop_at_rest = parts.stop_at_rest  # Scene.run ends a run at rest (unless told otherwise)
-        self.diagnostics = Diagnostics(self.model, self.state, self.forces, parts.rest.p99_speed)
+        self.diagnostics = Diagnostics(self.model, self.state, self.forces, parts.rest.p99_speed,
+                                       self.integrator.staggered_velocity)
         self._normals: VertexNormals | None = parts.normals
         self.steps_taken = 0
         self.topology_version = 0  # counts the changes of the cloth's triangles
@@ -138,7 +139,7 @@ class Scene:
         return m
 
     def measure(self) -> Measurement:
-        return self.diagnostics.measure()
+        return self.diagnostics.measure(self.clock.dt)
 
     def check(self) -> Measurement:
         """Measure the state; raise BlowUpError if it has NaNs, runaway speed or runaway strain."""

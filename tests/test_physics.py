@@ -89,7 +89,9 @@ def test_approx_implicit_statics_match_implicit_and_warm_start_blows_up_cleanly(
 @pytest.mark.slow
 @pytest.mark.parametrize("integrator", EXPLICIT)
 def test_undamped_explicit_conserves_energy(integrator):
-    """No damping, tiny step: the symplectic/two-level schemes keep the total energy of a swinging cloth."""
+    """No damping, tiny step: the symplectic/two-level schemes keep the total energy of a swinging cloth, as the
+    measurement reads it (kinetic energy from the velocity at the positions' time: 4e-8 of the swing's kinetic
+    energy measured, where the one-sided velocity (x - x_prev) / h read 4.6e-5)."""
     mat = tc.Material(density=0.2, stretch=50.0, shear=5.0, bend=1e-4, damping=0.0)
     cloth = tc.ClothBuilder.grid((0.4, 0.4), (8, 8), mat, center=(0.0, 1.0, 0.0), plane="xz")  # starts horizontal
     sc = tc.Scene(cloth, integrator=integrator, dt=2e-5, air_damping=0.0, precision="f64", pins=[{"indices": [0]}])
@@ -98,7 +100,7 @@ def test_undamped_explicit_conserves_energy(integrator):
     swing = sc.measure().kinetic
     assert swing > 0.05  # J: it really moved
     drift = max(abs(e - e0) for e in energies)
-    assert drift < 2e-3 * swing
+    assert drift < 1e-6 * swing
 
 
 @pytest.mark.slow

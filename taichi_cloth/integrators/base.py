@@ -44,6 +44,9 @@ class Integrator:
     unconditionally_stable: ClassVar[bool] = False
     #: True when positions alone carry the motion (velocity derived from history): Verlet, central difference
     position_based: ClassVar[bool] = False
+    #: True when v is the motion over the last step, (x - x_prev) / h: half a step behind the positions, so a
+    #: measurement adds half a step of acceleration to read the velocity at the positions' time (the explicit family)
+    staggered_velocity: ClassVar[bool] = False
 
     def __init__(self, model, state, forces, **options):
         self.model, self.state, self.forces = model, state, forces

@@ -26,6 +26,7 @@ class FusedSteps(Integrator):
     CHUNK = 8
     #: whether the force pass includes the air drag (the position schemes damp in their update)
     with_drag = True
+    staggered_velocity = True  # v = (x - x_prev) / h in every scheme of the family
 
     def __init__(self, model, state, forces, **options):
         super().__init__(model, state, forces, **options)
