@@ -230,9 +230,10 @@ class MeshCollider(ParticleCollider):
         v0, v1, v2 = self._corners(t)
         nrm = self.normals[t]
         plane = (qf - v0).dot(nrm)
-        tau = (1 + BAND) * ti.cast(self.thickness, ti.f32)  # the contact band (pushed below the thickness)
-        # the gap is at least the plane distance: far planes are culled before the closest-point computation
-        if plane < tau and plane > -reach:
+        # the gap is at least the plane distance: far planes are culled before the closest-point computation. The
+        # nearest face decides, in front of it or behind: a point just above a thin plate is also behind the plate's
+        # underside, and taking that for "inside" pushed it through (a 1 cm slab crossed by every glide)
+        if ti.abs(plane) < reach + BAND * ti.cast(self.thickness, ti.f32):  # reach: at least the thickness
             gap = plane
             direction = nrm
             if not inside_triangle(qf, v0, v1, v2, nrm):
@@ -240,13 +241,13 @@ class MeshCollider(ParticleCollider):
                 gap = offset.norm()
                 if gap > 1e-9:
                     direction = offset / gap
-            if gap < tau and ti.abs(gap) < ti.abs(best_gap):
+            if ti.abs(gap) < ti.abs(best_gap):
                 best, best_gap, best_dir = t, gap, direction
         return best, best_gap, best_dir
 
     @ti.func
     def _nearest_contact(self, i, n, q, reach):
-        """Among the n candidates, the closest one within (1 + BAND) x the thickness of q (at most `reach` inside):
+        """Among the n candidates, the closest one to q, in front or behind (within `reach` of its plane):
         (triangle or -1, signed gap [m], push direction)."""
         qf = ti.cast(q, ti.f32)
         best, best_gap, best_dir = -1, ti.cast(1e30, ti.f32), ti.Vector.zero(ti.f32, 3)
@@ -292,7 +293,7 @@ class MeshCollider(ParticleCollider):
                         # too close: away from the closest point of the surface, to the thickness
                         contacts += 1
                         push = (ti.cast(thickness, ti.f32) - gap) * direction
-                    elif near >= 0:
+                    elif near >= 0 and gap < (1 + BAND) * ti.cast(thickness, ti.f32):
                         # within the contact band: a contact for the solve (its friction), nothing to push
                         self.record_contact(i, ti.cast(direction, self.x.dtype), ti.cast(friction, self.x.dtype))
                         break
