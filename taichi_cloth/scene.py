@@ -284,6 +284,37 @@ class Scene:
             out.update(c.stats)
         return out
 
+    def limit_and_colliders(self) -> str | None:
+        """Whether the stretch limit and the colliders both hold now, in words (None unless the scene has both): every
+        limited spring within max_strain + tolerance, and no particle inside a collider (signed distance < 0); or
+        which one lost, and by how much (the colliders run after the limit and have the last word)."""
+        from collision.self_collision import SelfCollision
+
+        limit, colliders = self.controller("stretch_limit"), self.controller("colliders")
+        if limit is None or colliders is None:
+            return None
+        d, x = self.model.data, self.positions()
+        limited = np.isin(d.kind, [int(k) for k in limit.kinds])
+        if not limited.any():
+            return None
+        a, b = d.springs[limited, 0], d.springs[limited, 1]
+        strain = np.linalg.norm(x[b] - x[a], axis=1) / d.rest_length[limited] - 1.0
+        allowed = limit.max_strain + limit.tolerance
+        over = int(np.count_nonzero(strain > allowed))
+        depth = [c.signed_distance(x) for c in colliders.objects
+                 if hasattr(c, "signed_distance") and not isinstance(c, SelfCollision)]
+        gap = np.min(depth, axis=0) if depth else np.full(len(x), np.inf)
+        inside = int(np.count_nonzero(gap < 0))
+        strain_text = f"max strain {100 * strain.max():.2f} % (limit {100 * allowed:.2f} %)"
+        if not over and not inside:
+            return f"stretch limit and colliders agree: {strain_text}, no particle inside a collider"
+        lost = []
+        if over:
+            lost.append(f"{over} springs over the stretch limit, {strain_text}")
+        if inside:
+            lost.append(f"{inside} particles inside a collider, the deepest {1e3 * -gap.min():.2f} mm")
+        return "stretch limit and colliders disagree: " + "; ".join(lost)
+
     # ------------------------------------------------------------------ the loop
     def run(self, frames: int, recorder=None, entity: str | None = None, progress: bool = True,
             record_every: int = 1, translation=None, until_rest: bool | None = None) -> RunSummary:
@@ -344,6 +375,7 @@ class Scene:
             summary.steps_line = self.clock.describe(summary.dt_min, summary.dt_max, counters)
             if self.rest.status is not None:
                 summary.rest = self.rest.status.describe(self.rest.criterion)
+            summary.agreement = self.limit_and_colliders()
             log.flush()
         return summary
 

@@ -32,6 +32,7 @@ class RunSummary:
     wall_record: float = 0.0
     rest: str | None = None  # the rest criterion at the last frame (taichi_cloth.rest), in words
     stopped_at_rest: bool = False  # the run ended early because the cloth was at rest
+    agreement: str | None = None  # whether the stretch limit and the colliders both hold at the end, in words
     first_frame_wall: float = 0.0
     final: Measurement | None = None
     max_strain_seen: float = 0.0
@@ -106,6 +107,8 @@ class RunSummary:
                          f"max speed {f.max_speed:.3g} m/s")
         if self.rest is not None:
             lines.append(f"  {self.rest}" + ("; the run stopped there" if self.stopped_at_rest else ""))
+        if self.agreement is not None:
+            lines.append(f"  {self.agreement}")
         for e in self.events:
             lines.append(f"  {e}")
         for k, v in self.stats.items():

@@ -127,3 +127,23 @@ def test_friction_holds_a_sheet_on_a_ball_at_rest_and_without_it_the_sheet_slide
     slick = sheet_on_a_ball(0.0)
     slick.run(180, progress=False)
     assert slick.positions()[:, 1].max() < 0.3  # without friction it slid off the ball onto the floor
+
+
+def test_the_summary_says_whether_the_stretch_limit_and_the_colliders_agree():
+    """A sheet resting on a ball under a 10 % stretch limit: both hold. The same sheet held by two opposite edges
+    through a ball that pushes it up: the ball has the last word, the springs over it stretch past a 1 % limit, and
+    the summary counts them."""
+    ball = {"type": "sphere", "center": [0.0, 0.2, 0.0], "radius": 0.2, "friction": 0.8, "thickness": 0.004}
+    cloth = tc.ClothBuilder.grid((0.4, 0.4), (10, 10), "cotton", center=(0.0, 0.415, 0.0), plane="xz")
+    resting = tc.Scene(cloth, dt=1 / 120, air_damping=0.5, colliders=[ball], stretch_limit={"max_strain": 0.1})
+    text = resting.run(30, progress=False).format()
+    assert "stretch limit and colliders agree: max strain" in text and "no particle inside a collider" in text
+    edges = [{"box": ((-0.21, 0.3, z - 0.01), (0.21, 0.45, z + 0.01))} for z in (-0.2, 0.2)]
+    taut = tc.Scene(cloth, dt=1 / 120, air_damping=0.5, colliders=[{**ball, "center": [0.0, 0.33, 0.0]}],
+                    pins=edges, stretch_limit={"max_strain": 0.01, "tolerance": 1e-3})
+    text = taut.run(10, progress=False).format()
+    d, x = taut.model.data, taut.positions()
+    structural = np.isin(d.kind, [int(tc.SpringKind.STRUCTURAL), int(tc.SpringKind.SHEAR)])
+    strain = np.linalg.norm(x[d.springs[:, 1]] - x[d.springs[:, 0]], axis=1) / d.rest_length - 1
+    over = int(np.count_nonzero(strain[structural] > 0.011))
+    assert over > 0 and f"stretch limit and colliders disagree: {over} springs over the stretch limit" in text, text
