@@ -31,8 +31,8 @@ collider in the last step has its normal component filtered (S_i = I - n n^T: it
 change in the solve, the collider handles it).
 
 Preconditioners (option `preconditioner`):
-  jacobi     the diagonal of A, inline in the CG kernels, CHUNK iterations per launch; CG starts from the last
-             step's velocity change;
+  jacobi     the 3x3 diagonal blocks of S A S + M'(I - S) (block Jacobi), inline in the CG kernels, CHUNK
+             iterations per launch; CG starts from the last step's velocity change;
   multigrid  a V(1,1) cycle per CG iteration, applied as z = S V(S r), which keeps the preconditioner symmetric on
              the free subspace: over the cloth's nested 4-8 levels where it has them (multilevel.spring_multigrid:
              the same system rediscretised on every level), else over levels made by aggregating neighbouring
