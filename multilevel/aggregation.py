@@ -228,15 +228,14 @@ class AggregationMultigrid:
     def omega(self, value: float) -> None:
         self.weight[None] = float(value)
 
-    def prepare(self, u, axial, iso, mass, inv_mass, normal, mass_scale: float) -> None:
+    def prepare(self, u, axial, iso, mass, inv_mass, contacts, mass_scale: float) -> None:
         """Once per Newton system: the level operators of A~ from the springs' unit directions u ((S,) vec3 field),
         their coefficients axial, iso ((S,) fields [kg]: B_s = axial u u^T + iso I), the masses and inverse masses
-        ((P,) fields [kg], [1/kg]; inverse mass 0 = pinned), the contact normals ((P,) vec3 field, 0 = no contact;
-        None: no colliders) and the mass factor 1 + h gamma. One kernel launch."""
-        if normal is None:
-            self._prepare(u, axial, iso, mass, inv_mass, inv_mass, 0, float(mass_scale))
-        else:
-            self._prepare(u, axial, iso, mass, inv_mass, normal, 1, float(mass_scale))
+        ((P,) fields [kg], [1/kg]; inverse mass 0 = pinned), the contacts (an object whose Taichi function
+        projector(i) gives particle i's 3x3 filter S_i; None: no colliders) and the mass factor 1 + h gamma. One
+        kernel launch."""
+        self._prepare(u, axial, iso, mass, inv_mass, contacts if contacts is not None else inv_mass,
+                      int(contacts is not None), float(mass_scale))
 
     def apply(self, r, z) -> None:
         """z = V-cycle(r): r, z are (P,) vec3 fields of the cloth [kg m/s], [m/s]. One kernel launch."""
@@ -244,16 +243,13 @@ class AggregationMultigrid:
 
     # ------------------------------------------------------------------ helpers of the kernels
     @ti.func
-    def _filter(self, i, inv_mass: ti.template(), normal: ti.template(), contacts: ti.template()):
-        """S_i: 0 at a pin, I - n n^T / |n|^2 at a contact, else I."""
+    def _filter(self, i, inv_mass: ti.template(), contacts: ti.template(), with_contacts: ti.template()):
+        """S_i: 0 at a pin, else the contacts' filter of particle i (I without colliders)."""
         Si = ti.Matrix.identity(self.fp, 3)
         if inv_mass[i] == 0:
             Si = ti.Matrix.zero(self.fp, 3, 3)
-        elif ti.static(contacts):
-            n = ti.cast(normal[i], self.fp)
-            nn = n.dot(n)
-            if nn > 0:
-                Si -= n.outer_product(n) / nn
+        elif ti.static(with_contacts):
+            Si = ti.cast(contacts.projector(i), self.fp)
         return Si
 
     @ti.func
@@ -288,7 +284,7 @@ class AggregationMultigrid:
     # ------------------------------------------------------------------ the kernels
     @ti.kernel
     def _prepare(self, u: ti.template(), axial: ti.template(), iso: ti.template(), mass: ti.template(),
-                 inv_mass: ti.template(), normal: ti.template(), contacts: ti.template(), mass_scale: ti.f64):
+                 inv_mass: ti.template(), contacts: ti.template(), with_contacts: ti.template(), mass_scale: ti.f64):
         ms = ti.cast(mass_scale, self.fp)
         I3 = ti.Matrix.identity(self.fp, 3)
         # the cloth: D_i = S_i (M' + sum B_s) S_i + M' (I - S_i), O_s = -S_a B_s S_b
@@ -299,7 +295,7 @@ class AggregationMultigrid:
                 q = self.adj_edge[e]
                 uq = ti.cast(u[q], self.fp)
                 D += ti.cast(axial[q], self.fp) * uq.outer_product(uq) + ti.cast(iso[q], self.fp) * I3
-            Si = self._filter(i, inv_mass, normal, contacts)
+            Si = self._filter(i, inv_mass, contacts, with_contacts)
             mi = I3 * ti.cast(mass[i], self.fp) * ms
             self.diag[i] = Si @ D @ Si + mi - Si @ mi
         ti.loop_config(serialize=self.serial)
@@ -307,8 +303,8 @@ class AggregationMultigrid:
             uq = ti.cast(u[q], self.fp)
             B = ti.cast(axial[q], self.fp) * uq.outer_product(uq) + ti.cast(iso[q], self.fp) * I3
             a, b = self.end_a[q], self.end_b[q]
-            self.off[q] = -(self._filter(a, inv_mass, normal, contacts) @ B @ self._filter(b, inv_mass, normal,
-                                                                                            contacts))
+            self.off[q] = -(self._filter(a, inv_mass, contacts, with_contacts) @ B
+                            @ self._filter(b, inv_mass, contacts, with_contacts))
         # the coarse levels, each summed from the one above (Galerkin with piecewise-constant prolongation)
         for l in ti.static(range(1, MAX_LEVELS)):
             ti.loop_config(serialize=self.serial)

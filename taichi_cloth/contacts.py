@@ -40,7 +40,8 @@ class Contacts:
 
     @ti.func
     def projector(self, i):
-        """filter(i, .) as a 3x3 matrix."""
+        """Particle i's filter S_i (3x3): 0 when stuck, I - n n^T / |n|^2 on a contact (divided by |n|^2: a normal
+        written in float32 is unit only to 1e-7, and S must be a projector), else I."""
         n = self.normal[i]
         nn = n.dot(n)
         S = ti.Matrix.identity(self.model.fp, 3)
@@ -54,11 +55,4 @@ class Contacts:
     def filter(self, i, vec):
         """vec without its component along particle i's contact normal (vec itself when i is not in contact, 0
         when it is stuck)."""
-        n = self.normal[i]
-        out = vec
-        nn = n.dot(n)
-        if self.stuck[i] != 0:
-            out = vec * 0
-        elif nn > 0:  # divided by |n|^2: a normal written in float32 is unit only to 1e-7, and S must be a projector
-            out = vec - vec.dot(n) / nn * n
-        return out
+        return self.projector(i) @ vec

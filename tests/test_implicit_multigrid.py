@@ -227,7 +227,7 @@ def test_an_aggregation_v_cycle_is_symmetric_and_positive_and_its_levels_are_gal
     integ = sc.integrator
     integ._assemble(H, 1e-6, 10, 1)  # the Newton system's springs at the current state
     mg.prepare(integ.spring_u, integ.spring_axial, integ.spring_iso, sc.model.mass, sc.model.inv_mass,
-               sc.state.contacts.normal, 1 + H * GAMMA)
+               sc.state.contacts, 1 + H * GAMMA)
     n = sc.model.data.n_particles
     assert_symmetric_positive(mg, np.random.default_rng(7), np.ones(n, bool))  # every row: A~ has no zero rows
 
@@ -252,11 +252,11 @@ def test_an_aggregation_v_cycle_is_symmetric_and_positive_and_its_levels_are_gal
     D = stiffness_matrix(x, d.springs, d.damping, length)
     A = np.diag(np.repeat(d.mass, 3) * (1 + H * GAMMA)) + H * D + H * H * K
     normals = sc.state.contacts.normal.to_numpy()[:n]
+    held = sc.model.pinned | (sc.state.contacts.stuck.to_numpy()[:n] != 0)
     S = np.zeros((3 * n, 3 * n))
     for i in range(n):
         nn = normals[i] @ normals[i]
-        Si = np.zeros((3, 3)) if sc.model.pinned[i] else np.eye(3) - (np.outer(normals[i], normals[i]) / nn
-                                                                      if nn > 0 else 0)
+        Si = np.zeros((3, 3)) if held[i] else np.eye(3) - (np.outer(normals[i], normals[i]) / nn if nn > 0 else 0)
         S[3 * i:3 * i + 3, 3 * i:3 * i + 3] = Si
     M = np.diag(np.repeat(d.mass, 3) * (1 + H * GAMMA))
     At = S @ A @ S + M @ (np.eye(3 * n) - S)

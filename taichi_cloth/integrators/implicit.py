@@ -178,7 +178,7 @@ class Implicit(Integrator):
         mg = self.multigrid
         if isinstance(mg, AggregationMultigrid):
             mg.prepare(self.spring_u, self.spring_axial, self.spring_iso, self.model.mass, self.model.inv_mass,
-                       self.contacts.normal if self.has_contacts else None,
+                       self.contacts if self.has_contacts else None,
                        1.0 + dt * self.forces.air_damping_value)
         else:
             mg.prepare(self.state.x, self.model.inv_mass, dt, self.forces.air_damping_value)
