@@ -74,3 +74,16 @@ def flush_retired() -> int:
         _live -= 1
         done += 1
     return done
+
+
+def fill_prefix(f, values) -> None:
+    """Write `values` into the first len(values) entries of field `f` (fields are capacity-sized)."""
+    n = len(values)
+    if n == 0:
+        return
+    if n == f.shape[0]:
+        f.from_numpy(values)
+    else:
+        buf = f.to_numpy()
+        buf[:n] = values
+        f.from_numpy(buf)

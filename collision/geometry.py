@@ -51,7 +51,8 @@ def inside_triangle(x, a, b, c, n):
 
 @ti.func
 def collision_possibility(start_height, motion, n, reach_gate: ti.template()):
-    """The fuzzy collision possibility mu of Hsiao 2006 (our reconstruction: the published formula is illegible in the copy we have):
+    """The fuzzy collision possibility mu of Hsiao 2006 (our reconstruction: the published formula is illegible in
+    the copy we have):
     how directly the motion heads into the face, clamp(-motion . n / |motion|, 0, 1), and 0 when the particle
     moves along or away from the face, does not move, or cannot reach the face's plane this step
     (start_height = (p - a) . n above it, and the motion descends less than that) when reach_gate is set."""
@@ -109,3 +110,52 @@ def solid_angle(p, a, b, c):
     num = ra.dot(rb.cross(rc))
     den = la * lb * lc + ra.dot(rb) * lc + ra.dot(rc) * lb + rb.dot(rc) * la
     return 2.0 * ti.atan2(num, den)
+
+
+@ti.func
+def barycentric(p, a, b, c):
+    """Barycentric weights (w_a, w_b, w_c) of point p projected on the plane of triangle (a, b, c); zeros for a
+    degenerate triangle."""
+    e1 = b - a
+    e2 = c - a
+    w = p - a
+    d00 = e1.dot(e1)
+    d01 = e1.dot(e2)
+    d11 = e2.dot(e2)
+    d20 = w.dot(e1)
+    d21 = w.dot(e2)
+    den = d00 * d11 - d01 * d01
+    out = p - p  # zeros of p's type
+    if den > 0:
+        v = (d11 * d20 - d01 * d21) / den
+        u = (d00 * d21 - d01 * d20) / den
+        out = ti.Vector([1.0 - v - u, v, u])
+    return out
+
+
+@ti.func
+def closest_segment_params(p1, q1, p2, q2):
+    """Parameters (s, t) in [0, 1] of the closest points p1 + s (q1 - p1) and p2 + t (q2 - p2) of two segments
+    (Ericson, Real-Time Collision Detection, 5.1.9); parallel segments give s = 0."""
+    d1 = q1 - p1
+    d2 = q2 - p2
+    r = p1 - p2
+    a = d1.dot(d1)
+    e = d2.dot(d2)
+    f = d2.dot(r)
+    s = p1[0] * 0.0  # of p1's type
+    t = p1[0] * 0.0
+    if a > 1e-20 and e > 1e-20:
+        c = d1.dot(r)
+        b = d1.dot(d2)
+        den = a * e - b * b
+        if den > 1e-12 * a * e:
+            s = ti.math.clamp((b * f - c * e) / den, 0.0, 1.0)
+        t = (b * s + f) / e
+        if t < 0.0:
+            t = 0.0
+            s = ti.math.clamp(-c / a, 0.0, 1.0)
+        elif t > 1.0:
+            t = 1.0
+            s = ti.math.clamp((b - c) / a, 0.0, 1.0)
+    return s, t

@@ -44,9 +44,11 @@ class VoxelGrid:
             self.dims = tuple(int(math.ceil(grow * (h - l) / cell_size)) + 2 for l, h in zip(lo, hi))
             self.n_cells = self.dims[0] * self.dims[1] * self.dims[2]
         n_cells = self.n_cells
-        # a swept or hashed mesh moves: leave room for its boxes to grow (cloth folding, moving fast)
-        room = 4.0 if (hashed or self.swept) else grow * grow
-        self.pair_capacity = max(int(room * pairs) + 64, 64)
+        if hashed or self.swept:
+            # a moving mesh (cloth folding, moving fast): room for every triangle turned any way
+            self.pair_capacity = self._pairs_bound_np(vertices_np, triangles_np) + 64
+        else:
+            self.pair_capacity = max(int(grow * grow * pairs) + 64, 64)
         blk = FieldBlock()
         self.origin = blk.vector(3, ti.f32, ())
         self.cell_count = blk.scalar(ti.i32, n_cells)
@@ -61,6 +63,14 @@ class VoxelGrid:
         hi = v[t].max(1) + self.pad
         span = np.floor(hi / self.cell_size) - np.floor(lo / self.cell_size) + 1
         return int(span.prod(1).sum())
+
+    def _pairs_bound_np(self, v, t) -> int:
+        """(triangle, cell) pairs of the mesh in any pose that keeps its edge lengths, each triangle's box swept by
+        up to a cell in a step: a box of extent e along an axis meets at most floor(e / cell) + 2 cells, and e is at
+        most the longest edge plus twice the pad."""
+        longest = np.linalg.norm(v[t] - v[t[:, [1, 2, 0]]], axis=2).max(1)
+        per_axis = np.floor((longest + 2 * self.pad) / self.cell_size) + (3 if self.swept else 2)
+        return int((per_axis ** 3).sum())
 
     def build(self, vertices_np: np.ndarray | None = None) -> int:
         """(Re)bin every triangle; call after the mesh moved. The grid is re-centred on the mesh bounds (from
@@ -133,9 +143,8 @@ class VoxelGrid:
     @ti.kernel
     def _scan(self) -> ti.i32:
         # an exclusive prefix sum; serial, it is ~1e5 additions once per build
-        ti.loop_config(serialize=True)
         total = 0
-        ti.loop_config(serialize=self.serial)
+        ti.loop_config(serialize=True)
         for c in range(self.n_cells):
             self.cell_start[c] = total
             total += self.cell_count[c]

@@ -9,6 +9,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from clothbase.errors import warn
 from collision.self_collision import SelfCollision
 
@@ -93,7 +95,7 @@ def assemble(cloth, *, name: str = "cloth", integrator: str = DEFAULT_INTEGRATOR
     """
     auto = _check_step_options(dt, adaptive, fps, step_guard)
     rest_criterion, stop_at_rest = _rest(rest)
-    source = _cloth_source(cloth, precision, multilevel, sewing, self_collision)
+    source = _cloth_source(cloth, precision, multilevel, sewing)
     model = source.model
     state = State(model)
     parts_warnings: list[str] = []
@@ -107,9 +109,12 @@ def assemble(cloth, *, name: str = "cloth", integrator: str = DEFAULT_INTEGRATOR
 
     wind_source = Wind(model, state, **wind) if wind is not None else None
     objects = build_colliders(colliders, base_dir) if colliders else []
-    if self_collision:  # first, so that the body colliders have the last word on every position
+    if self_collision:  # last: a particle a body holds does not move for it (collision.self_collision)
         options = self_collision if isinstance(self_collision, dict) else {}
-        objects.insert(0, SelfCollision(model.data.triangles, model.data.positions, **options))
+        seams = np.unique(source.garment.seam_pairs) if source.garment is not None else ()
+        # the mesh in use first: its edges give the starting thickness and its particles the seam flags
+        shapes = [(d.positions, d.triangles) for d in [model.data] + [d for d in source.levels if d is not model.data]]
+        objects.append(SelfCollision(model.triangles, model.n_triangles, shapes, seam_particles=seams, **options))
     collide = None
     if objects:
         state.contacts = Contacts(model)
@@ -181,14 +186,11 @@ class _Source:
     garment: object = None
 
 
-def _cloth_source(cloth, precision: str, multilevel, sewing, self_collision) -> _Source:
+def _cloth_source(cloth, precision: str, multilevel, sewing) -> _Source:
     from .garment.garment import GarmentCloth
     from .multilevel_cloth import MultilevelCloth
 
     if isinstance(cloth, MultilevelCloth):
-        if self_collision:
-            raise SceneError("self_collision is not supported on a multilevel cloth yet (its triangle grid would "
-                             "have to be rebuilt at every level switch)")
         if sewing is not None:
             raise SceneError("[sewing] needs a garment cloth (a garment file, or taichi_cloth.garment.build_garment)")
         model = Model(cloth.levels[cloth.start_level], precision, capacity=cloth.capacity)
@@ -196,9 +198,6 @@ def _cloth_source(cloth, precision: str, multilevel, sewing, self_collision) -> 
     if multilevel is not None:
         raise SceneError("[multilevel] needs a cloth built as a 4-8 hierarchy (ClothBuilder.multilevel_grid)")
     if isinstance(cloth, GarmentCloth):
-        if self_collision:
-            raise SceneError("self_collision is not supported on a garment yet (merging the seams changes its "
-                             "triangles)")
         model = Model(cloth.data, precision)
         fixed = [PinSpec(near=cloth.fixed_targets)] if len(cloth.fixed) else []
         return _Source(model, [cloth.data], fixed, garment=cloth)

@@ -83,9 +83,9 @@ def build_colliders(specs, base_dir: Path | None = None) -> list:
 
 
 class Colliders(Controller):
-    """The scene's colliders, resolved after every step in order (self-collision first, so that the bodies have
-    the last word on every position). objects: collision objects (MeshCollider, PrimitiveColliders,
-    SelfCollision); contacts: the scene's Contacts, whose normals they write.
+    """The scene's colliders, resolved after every step in order (self-collision last: it never pushes a particle
+    that a body holds into that body, so a body does not undo it). objects: collision objects (MeshCollider,
+    PrimitiveColliders, SelfCollision); contacts: the scene's Contacts, whose normals they write.
 
     moving: indices of the objects whose surface moves during a run (a morphing body): the recorder logs them on
     the timeline instead of once
@@ -141,6 +141,13 @@ class Colliders(Controller):
         self.contacts.clear()
         for c in self.objects:
             c.resolve(dt)
+
+    def model_changed(self, change, t: float, dt: float) -> None:
+        """A refill (seam merge, level switch, reset): self-collision follows the new triangles."""
+        if change.data is not None:
+            for c in self.objects:
+                if isinstance(c, SelfCollision):
+                    c.topology_changed(change.data.positions, change.data.triangles)
 
     def layout(self, layout) -> None:
         for k, c in enumerate(self.objects):

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 import taichi as ti
 
-from clothbase.fields import FieldBlock
+from clothbase.fields import FieldBlock, fill_prefix
 
 from .cloth import ClothData
 from .runtime import ensure_initialized, serial_loops
@@ -102,28 +102,28 @@ class Model:
         self._omega = None  # omega_max, estimated on demand
         self.n_particles[None], self.n_springs[None], self.n_triangles[None] = P, S, T
         npfp = self.np_dtype
-        _fill(self.rest_x, data.positions.astype(npfp))
-        _fill(self.mass, data.mass.astype(npfp))
-        _fill(self.inv_mass, (1.0 / data.mass).astype(npfp))
+        fill_prefix(self.rest_x, data.positions.astype(npfp))
+        fill_prefix(self.mass, data.mass.astype(npfp))
+        fill_prefix(self.inv_mass, (1.0 / data.mass).astype(npfp))
         a, b = data.springs[:, 0], data.springs[:, 1]
-        _fill(self.spring_a, a.astype(np.int32))
-        _fill(self.spring_b, b.astype(np.int32))
-        _fill(self.rest_length, data.rest_length.astype(npfp))
-        _fill(self.stiffness, data.stiffness.astype(npfp))
-        _fill(self.damping, data.damping.astype(npfp))
-        _fill(self.spring_kind, data.kind.astype(np.int32))
-        _fill(self.stiffness_sum, self.stiffness_sum_np().astype(npfp))
+        fill_prefix(self.spring_a, a.astype(np.int32))
+        fill_prefix(self.spring_b, b.astype(np.int32))
+        fill_prefix(self.rest_length, data.rest_length.astype(npfp))
+        fill_prefix(self.stiffness, data.stiffness.astype(npfp))
+        fill_prefix(self.damping, data.damping.astype(npfp))
+        fill_prefix(self.spring_kind, data.kind.astype(np.int32))
+        fill_prefix(self.stiffness_sum, self.stiffness_sum_np().astype(npfp))
         sid = np.arange(S)
         offsets, adj_spring, adj_other = csr(np.concatenate([a, b]), P, np.concatenate([sid, sid]),
                                              np.concatenate([b, a]))
-        _fill(self.adj_offset, offsets.astype(np.int32))
-        _fill(self.adj_spring, adj_spring.astype(np.int32))
-        _fill(self.adj_other, adj_other.astype(np.int32))
+        fill_prefix(self.adj_offset, offsets.astype(np.int32))
+        fill_prefix(self.adj_spring, adj_spring.astype(np.int32))
+        fill_prefix(self.adj_other, adj_other.astype(np.int32))
         tri = data.triangles.astype(np.int32)
-        _fill(self.triangles, tri)
+        fill_prefix(self.triangles, tri)
         toff, tlist = csr(tri.reshape(-1).astype(np.int64), P, np.repeat(np.arange(T), 3))
-        _fill(self.tri_offset, toff.astype(np.int32))
-        _fill(self.tri_list, tlist.astype(np.int32))
+        fill_prefix(self.tri_offset, toff.astype(np.int32))
+        fill_prefix(self.tri_list, tlist.astype(np.int32))
 
     def pin(self, indices) -> None:
         """Make particles immovable (inverse mass 0). Their mass still counts for energy and weight."""
@@ -133,7 +133,7 @@ class Model:
         self.pinned[idx] = True
         self._omega = None
         inv = np.where(self.pinned, 0.0, 1.0 / self.data.mass)
-        _fill(self.inv_mass, inv.astype(self.np_dtype))
+        fill_prefix(self.inv_mass, inv.astype(self.np_dtype))
 
     def set_stiffness(self, stiffness) -> None:
         """Replace the spring constants [N/m] (scalar or (S,)); kernels read the field, nothing recompiles.
@@ -143,9 +143,9 @@ class Model:
         ratio = np.divide(self.data.damping, k_old, out=np.zeros_like(k_old), where=k_old > 0)
         self.data.stiffness, self.data.damping = k, ratio * k
         self._omega = None
-        _fill(self.stiffness, k.astype(self.np_dtype))
-        _fill(self.stiffness_sum, self.stiffness_sum_np().astype(self.np_dtype))
-        _fill(self.damping, self.data.damping.astype(self.np_dtype))
+        fill_prefix(self.stiffness, k.astype(self.np_dtype))
+        fill_prefix(self.stiffness_sum, self.stiffness_sum_np().astype(self.np_dtype))
+        fill_prefix(self.damping, self.data.damping.astype(self.np_dtype))
 
     def set_mass(self, mass) -> None:
         """Replace the particle masses [kg] (scalar or (P,)); pins are kept."""
@@ -154,8 +154,8 @@ class Model:
             raise ValueError("every particle needs a positive mass")
         self.data.mass = m
         self._omega = None
-        _fill(self.mass, m.astype(self.np_dtype))
-        _fill(self.inv_mass, np.where(self.pinned, 0.0, 1.0 / m).astype(self.np_dtype))
+        fill_prefix(self.mass, m.astype(self.np_dtype))
+        fill_prefix(self.inv_mass, np.where(self.pinned, 0.0, 1.0 / m).astype(self.np_dtype))
 
     @property
     def np_dtype(self):
@@ -191,17 +191,6 @@ class Model:
         return float(r.max()) if len(r) else 0.0
 
 
-def _fill(f, values: np.ndarray) -> None:
-    """Write `values` into the first len(values) entries of field `f` (fields are capacity-sized)."""
-    n = len(values)
-    if n == 0:
-        return
-    if n == f.shape[0]:
-        f.from_numpy(values)
-    else:
-        buf = f.to_numpy()
-        buf[:n] = values
-        f.from_numpy(buf)
 
 
 @ti.data_oriented
@@ -246,4 +235,4 @@ class State:
         """Overwrite positions [m] and/or velocities [m/s] ((P,3) arrays)."""
         for f, val in ((self.x, x), (self.v, v)):
             if val is not None:
-                _fill(f, np.asarray(val, dtype=self.model.np_dtype))
+                fill_prefix(f, np.asarray(val, dtype=self.model.np_dtype))

@@ -63,10 +63,10 @@ friction = 0.8
                              .replace("\nself_collision = true\n[[colliders]]", "\n[[colliders]]", 1))).scene
     colliders = sc.controller("colliders").objects
     kinds = [type(c).__name__ for c in colliders]
-    assert kinds == ["SelfCollision", "MeshCollider", "PrimitiveColliders", "PrimitiveColliders"]
-    assert colliders[1].mode == "exact" and colliders[1].repulsion.distance == 0.005
-    assert colliders[3].friction == 0.8 and colliders[2].n_spheres == 1
-    assert sc.forces.sources == (colliders[1].repulsion,)
+    assert kinds == ["MeshCollider", "PrimitiveColliders", "PrimitiveColliders", "SelfCollision"]
+    assert colliders[0].mode == "exact" and colliders[0].repulsion.distance == 0.005
+    assert colliders[2].friction == 0.8 and colliders[1].n_spheres == 1
+    assert sc.forces.sources == (colliders[0].repulsion,)
 
 
 def test_overrides_replace_integrator_and_step(tmp_path):

@@ -1,0 +1,142 @@
+"""Self-collision on cloth whose triangles change (a seam merge, a 4-8 level switch), and the exact count of
+intersecting triangle pairs that measures it."""
+import numpy as np
+import pytest
+
+import taichi_cloth as tc
+from collision.intersections import _segment_pierces, count_intersecting_pairs, intersecting_pairs
+from collision.self_collision import SelfCollision
+from conftest import current_level, refine
+from taichi_cloth.builder import multilevel_grid
+from taichi_cloth.garment.garment import FreePlacement, GarmentSpec, build_garment
+from taichi_cloth.garment.pattern import PatternPiece
+from taichi_cloth.garment.seams import Seam, SeamSide
+
+
+# ---------------------------------------------------------------------- the exact count
+def test_two_triangles_intersect_exactly_when_an_edge_pierces_the_other():
+    flat = [[0, 0, 0], [1, 0, 0], [0, 1, 0]]
+    through = [[0.2, 0.2, -0.5], [0.3, 0.2, 0.5], [0.2, 0.4, 0.5]]  # an edge crosses the flat one at (0.25, 0.2)
+    x = np.array(flat + through, float)
+    assert count_intersecting_pairs(x, [[0, 1, 2], [3, 4, 5]]) == 1
+    above = x.copy()
+    above[3:, 2] += 0.51  # the lowest corner now 0.01 above the plane
+    assert count_intersecting_pairs(above, [[0, 1, 2], [3, 4, 5]]) == 0
+    beside = x.copy()
+    beside[3:, 0] += 0.6  # the piercing point (0.85, 0.2) now lies beyond the hypotenuse x + y = 1
+    assert count_intersecting_pairs(beside, [[0, 1, 2], [3, 4, 5]]) == 0
+    # neighbours sharing a vertex always touch and are not counted, even folded through each other
+    assert count_intersecting_pairs(x, [[0, 1, 2], [0, 4, 5]]) == 0
+
+
+def test_the_broad_phase_misses_no_pair():
+    rng = np.random.default_rng(3)
+    x = rng.uniform(0, 1, (90, 3))
+    t = rng.permutation(90).reshape(30, 3)
+    found = {tuple(p) for p in intersecting_pairs(x, t)}
+    brute = set()
+    for i in range(30):
+        for j in range(i + 1, 30):
+            a, b = x[t[i]], x[t[j]]
+            hit = any(_segment_pierces(a[k][None], a[(k + 1) % 3][None], b[None])[0] for k in range(3)) or \
+                any(_segment_pierces(b[k][None], b[(k + 1) % 3][None], a[None])[0] for k in range(3))
+            if hit:
+                brute.add((i, j))
+    assert len(brute) > 10 and found == brute
+
+
+def test_a_sheet_folded_through_itself_has_intersecting_pairs_and_a_flat_one_none():
+    sheet = tc.ClothBuilder.grid((1.0, 1.0), (10, 10))
+    x, t = sheet.positions.copy(), sheet.triangles
+    assert count_intersecting_pairs(x, t) == 0
+    # fold the half x > 0.1 back over the rest, 5 cm above it, then tilt it through the lower layer
+    right = x[:, 0] > 0.1
+    x[right, 0] = 0.2 - x[right, 0]
+    x[right, 2] = 0.05 - 0.2 * (x[right, 0] + 0.4)
+    assert count_intersecting_pairs(x, t) > 5
+
+
+# ---------------------------------------------------------------------- a plain sheet, a garment
+@pytest.mark.slow
+def test_self_collision_keeps_a_folded_towel_in_two_layers():
+    """A towel on the floor gets one edge carried over onto the other half (a keyframed pin). Without
+    self-collision the folded half sinks through into the floor layer; with it, it rests on the bottom half."""
+    n = 12
+    L = 0.6
+
+    def fold(self_collision):
+        cloth = tc.ClothBuilder.grid((L, L / 2), (2 * n, n), "cotton", center=(0.0, 0.003, 0.0), plane="xz")
+        keys = [[t, -L / 2 * (1 - np.cos(np.pi * t)), 0.18 * np.sin(np.pi * t), 0.0] for t in np.linspace(0, 1, 11)]
+        keys[-1][1:3] = [-L + 0.01, 0.015]
+        edge = [i for i in range(2 * n * n) if i % (2 * n) == 2 * n - 1]
+        sc = tc.Scene(cloth, integrator="implicit", dt=1 / 240, air_damping=1.0, self_collision=self_collision,
+                      pins=[{"indices": edge, "path": keys}], integrator_options={"cg_tolerance": 1e-3},
+                      colliders=[{"type": "plane", "point": [0, 0, 0], "normal": [0, 1, 0]}])
+        sc.step(360)
+        top = cloth.positions[:, 0] > 0.0  # the half that was carried over
+        return np.mean(sc.positions()[top, 1] < 0.003 + 0.003), sc
+
+    sunk_without, _ = fold(False)
+    sunk_with, sc = fold(True)
+    assert sunk_without > 0.6
+    assert sunk_with < 0.3
+    assert sc.controller("colliders").objects[-1].counter_values()["point-triangle contacts"] > 0
+    assert count_intersecting_pairs(sc.positions(), sc.model.data.triangles) == 0
+
+
+
+def square(name, size=0.2):
+    return PatternPiece.from_polygon(name, [[0, 0], [size, 0], [size, size], [0, size]],
+                                     corner_names=["bl", "br", "tr", "tl"])
+
+
+def pillowcase(spacing=0.02):
+    """Two 0.2 m squares laid flat one above the other (4 cm apart, the upper one over a ball's top) and sewn along
+    one side: the upper layer falls onto the lower one draped over the ball."""
+    seam = Seam("side", SeamSide("A", "br", "tr"), SeamSide("B", "br", "tr"))
+    down, left = (0.0, 0.0, 1.0), (1.0, 0.0, 0.0)
+    spec = GarmentSpec("pillowcase", [square("A"), square("B")], [seam],
+                       {"A": FreePlacement((0.0, 0.26, 0.0), left, down, at=(0.1, 0.1)),
+                        "B": FreePlacement((0.0, 0.30, 0.0), left, down, at=(0.1, 0.1))}, spacing=spacing)
+    return build_garment(spec)
+
+
+def drape_pillowcase(self_collision: bool):
+    sc = tc.Scene(pillowcase(), integrator="implicit", dt=1 / 240, air_damping=1.0,
+                  integrator_options={"cg_tolerance": 1e-3}, self_collision=self_collision,
+                  sewing=dict(close_speed=0.5, epsilon=0.002, gravity=True),
+                  colliders=[{"type": "sphere", "center": [0, 0, 0], "radius": 0.25, "friction": 0.5}])
+    sc.run(90, progress=False)  # 1.5 s
+    return sc
+
+
+@pytest.mark.slow
+def test_self_collision_keeps_the_layers_of_a_sewn_garment_apart():
+    without, with_ = drape_pillowcase(False), drape_pillowcase(True)
+    for sc in (without, with_):
+        assert sc.controller("sewing").joined  # the seam closed and merged with the layers held apart
+        assert sc.model.data.n_particles == 2 * 121 - 11
+    assert count_intersecting_pairs(without.positions(), without.model.data.triangles) > 10
+    assert count_intersecting_pairs(with_.positions(), with_.model.data.triangles) == 0
+    assert with_.controller("colliders").objects[-1].counter_values()["point-triangle contacts"] > 0
+
+
+# ---------------------------------------------------------------------- a 4-8 cloth: a level switch
+def test_self_collision_follows_a_level_switch_without_compiling():
+    cloth = multilevel_grid((0.6, 0.6), (4, 4), 3, "cotton", center=(0.0, 0.3, 0.0), plane="xz")
+    sc = tc.Scene(cloth, integrator="implicit", dt=1 / 120, self_collision=True, multilevel={"refine": False},
+                  colliders=[{"type": "sphere", "center": [0, 0, 0], "radius": 0.2}])
+    obj = sc.controller("colliders").objects[-1]
+    assert isinstance(obj, SelfCollision)
+    coarse = obj.thickness
+    sc.step(12)
+    refine(sc)
+    assert current_level(sc) == 1
+    assert obj.thickness == pytest.approx(coarse / np.sqrt(2), rel=0.05)  # a quarter of the new level's edge
+    with tc.CompileCounter() as cc:
+        sc.step(12)
+        refine(sc)
+        sc.step(12)
+    assert cc.total == 0, cc.compiled
+    assert sc.model.data.n_particles == len(cloth.levels[2].positions)
+    assert count_intersecting_pairs(sc.positions(), sc.model.data.triangles) == 0
