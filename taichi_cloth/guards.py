@@ -114,7 +114,8 @@ def check_run_length(scene, frames: int, confirmed: bool = False, label: str = "
     line = (f"{frames} frames of {scene.substeps:,} steps (dt = {scene.dt:.3g} s) = {steps:,} steps, "
             f"about {human_seconds(seconds)} on this CPU (estimate)")
     if steps > MAX_STEPS and not confirmed:
-        raise SceneError(f"{label}: the run is too long: {line}; more than {MAX_STEPS:,} steps needs --yes (or raise dt)")
+        raise SceneError(f"{label}: the run is too long: {line}; more than {MAX_STEPS:,} steps needs --yes "
+                         "(or raise dt)")
     if seconds > ANNOUNCE_SECONDS or steps > MAX_STEPS:
         announce(f"this run takes {line}")
 
