@@ -64,13 +64,17 @@ def run_scene_file(scene_path, args, quiet: bool = False):
     if loaded.config.get("_quality") is not None and not quiet:
         print(loaded.config["_quality"].describe())
     check_run_length(scene, loaded.frames, confirmed=getattr(args, "yes", False), label=str(scene_path))
-    suffixes = ([".rrd"] if loaded.output["record"] else []) + ([".obj", ".ply"] if loaded.output["mesh"] else [])
+    suffixes = ([".rrd"] if loaded.output["record"] else []) + ([".obj", ".ply"] if loaded.output["mesh"] else []) \
+        + ([".png", "-pattern.png"] if getattr(args, "png", False) else [])
     stem = free_stem(out, loaded.name, suffixes)
     rec = None
     if loaded.output["record"]:
         from .recorder import Recorder
 
+        from .pattern_view import log_scene_pattern
+
         rec = Recorder(out / f"{stem}.rrd", recording_name=loaded.name, overwrite=True)
+        log_scene_pattern(rec, scene)
     summary = None
     try:
         summary = scene.run(loaded.frames, recorder=rec, progress=not getattr(args, "no_progress", False),
@@ -89,6 +93,10 @@ def run_scene_file(scene_path, args, quiet: bool = False):
                 out.mkdir(parents=True, exist_ok=True)
                 for suffix in (".obj", ".ply"):
                     summary.outputs.append(str(scene.export_mesh(out / f"{stem}{suffix}")))
+            if getattr(args, "png", False):
+                from .still import write_pictures
+
+                summary.outputs += [str(p) for p in write_pictures(scene, out / stem)]
     if not quiet:
         print(summary.format())
         if scene.controller("sewing") is not None:
