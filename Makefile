@@ -15,7 +15,7 @@ $(VENV)/.installed: pyproject.toml
 	touch $@
 
 demo: $(VENV)/.installed
-	$(PY) demos/sew_tshirt.py --out $(OUT)
+	$(PY) demos/sew_tshirt.py --out $(OUT) --png
 
 # two workers, one test file each at a time (a file's scenes share its module fixtures); TEST_WORKERS=0 runs serially
 TEST_WORKERS ?= 2

@@ -105,6 +105,16 @@ def mesh_problems(vertices, triangles) -> dict:
     return out
 
 
+def open_mesh_warning(triangles, source: str = "mesh") -> None:
+    """Warn when a collider mesh is open (edges on one triangle only): it has no inside, so it holds the cloth
+    off its surface from one side only."""
+    boundary = int(np.count_nonzero(edge_face_counts(triangles) == 1))
+    if boundary:
+        warn(f"{source}: the collider mesh is open ({boundary} boundary edges, not watertight): it acts as a "
+             "one-sided collider; cloth that passes an edge or a hole is not pushed back out, since an open mesh "
+             "has no inside")
+
+
 def validate_triangle_mesh(vertices, triangles, source: str = "mesh") -> None:
     """Raise MeshError naming `source` and the first defect found (see mesh_problems)."""
     v, t = np.asarray(vertices), np.asarray(triangles)
@@ -162,12 +172,18 @@ def load_triangle_mesh(path: str | Path, scale: float = 1.0, translate=(0.0, 0.0
     path = Path(path)
     if not path.is_file():
         raise MeshError(f"{path}: no such mesh file")
+    if path.suffix.lower() == ".dxf":
+        raise MeshError(f"{path}: unreadable as a mesh: a DXF file holds 2D pattern outlines, not triangles (a "
+                        "garment file reads them: dxf = \"pattern.dxf\")")
     try:
         mesh = trimesh.load(path, force="mesh", process=False)
+        v = np.asarray(mesh.vertices, dtype=np.float64).reshape(-1, 3)
+        t = np.asarray(mesh.faces, dtype=np.int64).reshape(-1, 3)
     except Exception as exc:  # trimesh raises many types for unreadable files
-        raise MeshError(f"{path}: cannot read the mesh ({exc})") from None
-    v = np.asarray(mesh.vertices, dtype=np.float64)
-    t = np.asarray(mesh.faces, dtype=np.int64)
+        raise MeshError(f"{path}: unreadable as a mesh ({type(exc).__name__}: {exc})") from None
+    if len(v) == 0 or len(t) == 0:
+        raise MeshError(f"{path}: unreadable as a mesh: no {'vertices' if len(v) == 0 else 'triangles'} found in "
+                        "it (is it a mesh file? OBJ, STL, PLY, OFF, GLB)")
     if len(v) and len(t) and np.all(np.isfinite(v)):
         merged = trimesh.Trimesh(v, t, process=True, validate=False)  # merge duplicate vertices (OBJ uv seams)
         v, t = np.asarray(merged.vertices, dtype=np.float64), np.asarray(merged.faces, dtype=np.int64)

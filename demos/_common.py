@@ -9,17 +9,18 @@ from pathlib import Path
 
 import taichi_cloth as tc
 from taichi_cloth.cli import add_run_arguments, rerun_command
+from taichi_cloth.guards import check_run_length
 
 DEMOS = Path(__file__).resolve().parent
 SCENES = DEMOS / "scenes"
 GARMENTS = DEMOS / "garments"
 
-__all__ = ["DEMOS", "GARMENTS", "SCENES", "arguments", "ends", "load", "opened_with"]
+__all__ = ["DEMOS", "GARMENTS", "SCENES", "arguments", "ends", "load", "opened_with", "pictures"]
 
 
 def arguments(doc: str, argv=None, extra=None) -> argparse.Namespace:
-    """The demo's command line: --out, --frames, --integrator, --dt, --arch, --precision, --quality, --no-progress
-    (as `python -m taichi_cloth run`), plus what `extra(parser)` adds."""
+    """The demo's command line: --out, --frames, --integrator, --dt, --arch, --precision, --quality, --no-progress,
+    --yes, --png (as `python -m taichi_cloth run`), plus what `extra(parser)` adds."""
     parser = argparse.ArgumentParser(description=doc.strip().splitlines()[0])
     add_run_arguments(parser)
     if extra is not None:
@@ -35,7 +36,18 @@ def load(scene_file, args):
                            precision=args.precision, quality=args.quality, out=args.out)
     if getattr(args, "until_rest", False):
         loaded.scene.stop_at_rest = True
+    check_run_length(loaded.scene, loaded.frames, confirmed=getattr(args, "yes", False), label=str(scene_file))
     return loaded
+
+
+def pictures(scene, recording, args) -> list:
+    """With --png: the still pictures of the run beside its recording (taichi_cloth.still.write_pictures: the
+    final drape, front and side, and a garment's pattern); their paths as str, for the summary's outputs."""
+    if not getattr(args, "png", False):
+        return []
+    from taichi_cloth.still import write_pictures
+
+    return [str(p) for p in write_pictures(scene, Path(recording).with_suffix(""))]
 
 
 def opened_with(path) -> str:

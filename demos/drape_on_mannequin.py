@@ -7,7 +7,7 @@ Writes DIR/drape_on_mannequin.rrd (the body logged once) and the final mesh, and
 counters: triangle tests done by the fuzzy ranking against the candidates in the touched voxels.
 """
 import taichi_cloth as tc
-from _common import SCENES, arguments, ends, load, opened_with
+from _common import SCENES, arguments, ends, load, opened_with, pictures
 
 
 def main(argv=None) -> int:
@@ -19,6 +19,7 @@ def main(argv=None) -> int:
     with tc.Recorder(args.out / "drape_on_mannequin.rrd", recording_name="drape_on_mannequin") as rec:
         summary = scene.run(loaded.frames, recorder=rec, progress=not args.no_progress)
     summary.outputs += [str(rec.path)] + [str(scene.export_mesh(rec.path.with_suffix(s))) for s in (".obj", ".ply")]
+    summary.outputs += pictures(scene, rec.path, args)  # --png: the final drape (and the pattern) as PNGs
     print(summary.format())
     print(opened_with(rec.path))
     return 0

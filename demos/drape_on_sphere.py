@@ -6,7 +6,7 @@
 Writes DIR/drape_on_sphere.rrd (the ball and floor logged once) and the final mesh.
 """
 import taichi_cloth as tc
-from _common import SCENES, arguments, ends, load, opened_with
+from _common import SCENES, arguments, ends, load, opened_with, pictures
 
 
 def main(argv=None) -> int:
@@ -18,6 +18,7 @@ def main(argv=None) -> int:
     with tc.Recorder(args.out / "drape_on_sphere.rrd", recording_name="drape_on_sphere") as rec:
         summary = scene.run(loaded.frames, recorder=rec, progress=not args.no_progress)
     summary.outputs += [str(rec.path)] + [str(scene.export_mesh(rec.path.with_suffix(s))) for s in (".obj", ".ply")]
+    summary.outputs += pictures(scene, rec.path, args)  # --png: the final drape (and the pattern) as PNGs
     print(summary.format())
     print(opened_with(rec.path))
     return 0

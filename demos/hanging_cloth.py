@@ -6,7 +6,7 @@
 Writes DIR/hanging_cloth.rrd (open it with `rerun DIR/hanging_cloth.rrd`) and the final mesh as .obj/.ply.
 """
 import taichi_cloth as tc
-from _common import SCENES, arguments, ends, load, opened_with
+from _common import SCENES, arguments, ends, load, opened_with, pictures
 
 
 def main(argv=None) -> int:
@@ -18,6 +18,7 @@ def main(argv=None) -> int:
     with tc.Recorder(args.out / "hanging_cloth.rrd", recording_name="hanging_cloth") as rec:
         summary = scene.run(loaded.frames, recorder=rec, progress=not args.no_progress)
     summary.outputs += [str(rec.path)] + [str(scene.export_mesh(rec.path.with_suffix(s))) for s in (".obj", ".ply")]
+    summary.outputs += pictures(scene, rec.path, args)  # --png: the final drape (and the pattern) as PNGs
     print(summary.format())
     print(opened_with(rec.path))
     return 0

@@ -8,7 +8,7 @@ Writes DIR/multilevel_drape.rrd: the mesh topology changes at each level switch 
 metrics/cloth/level plots the level over time. Open it with `rerun DIR/multilevel_drape.rrd`.
 """
 import taichi_cloth as tc
-from _common import SCENES, arguments, ends, load, opened_with
+from _common import SCENES, arguments, ends, load, opened_with, pictures
 
 
 def main(argv=None) -> int:
@@ -20,6 +20,7 @@ def main(argv=None) -> int:
     with tc.Recorder(args.out / "multilevel_drape.rrd", recording_name="multilevel_drape") as rec:
         summary = scene.run(loaded.frames, recorder=rec, progress=not args.no_progress)
     summary.outputs += [str(rec.path)] + [str(scene.export_mesh(rec.path.with_suffix(s))) for s in (".obj", ".ply")]
+    summary.outputs += pictures(scene, rec.path, args)  # --png: the final drape (and the pattern) as PNGs
     print(summary.format())
     print(opened_with(rec.path))
     return 0

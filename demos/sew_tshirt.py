@@ -11,8 +11,9 @@ boundary-length error between the 2D pattern and the 3D drape, edge strain; seam
 equilibrium).
 """
 import taichi_cloth as tc
-from _common import SCENES, arguments, ends, load, opened_with
+from _common import SCENES, arguments, ends, load, opened_with, pictures
 from taichi_cloth.garment.metrics import garment_quality
+from taichi_cloth.pattern_view import log_scene_pattern
 
 
 def main(argv=None) -> int:
@@ -22,8 +23,10 @@ def main(argv=None) -> int:
     scene = loaded.scene
     # the recording is closed, and kept, also when the run blows up
     with tc.Recorder(args.out / "sew_tshirt.rrd", recording_name="sew_tshirt") as rec:
+        log_scene_pattern(rec, scene)  # the pattern's seam set-up, a 2D view under pattern/
         summary = scene.run(loaded.frames, recorder=rec, progress=not args.no_progress)
     summary.outputs += [str(rec.path)] + [str(scene.export_mesh(rec.path.with_suffix(s))) for s in (".obj", ".ply")]
+    summary.outputs += pictures(scene, rec.path, args)  # --png: the final drape (and the pattern) as PNGs
     print(summary.format())
     print(garment_quality(scene).format())  # per piece: area, boundary and strain; seam gap, penetrations
     print(opened_with(rec.path))

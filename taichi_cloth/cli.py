@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 
 from .errors import BlowUpError, MeshError, PatternError, SceneError
+from .guards import MAX_STEPS, check_run_length
 from .paths import free_stem
 from .quality import QUALITIES
 
@@ -26,6 +27,10 @@ def add_run_arguments(p: argparse.ArgumentParser, frames_default=None) -> None:
     p.add_argument("--quality", choices=QUALITIES, help="a measured preset (integrator, step, level) from `bench "
                    "tradeoff`: preview | balanced | accurate; --integrator and --dt still override it")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--yes", action="store_true", help="run even when the run has more steps than the guard allows "
+                   f"({MAX_STEPS:,}; the count and an estimated time are printed first)")
+    p.add_argument("--png", action="store_true", help="also write still pictures beside the recording: NAME.png "
+                   "(the final drape, front and side, strain colours) and, for a garment, NAME-pattern.png")
     p.add_argument("--until-rest", action="store_true",
                    help="end the run at the first frame at which the cloth is at rest (the scene's [rest] criterion; "
                         "--frames is then the most it runs)")
@@ -58,13 +63,18 @@ def run_scene_file(scene_path, args, quiet: bool = False):
     scene, out = loaded.scene, Path(loaded.output["dir"])
     if loaded.config.get("_quality") is not None and not quiet:
         print(loaded.config["_quality"].describe())
-    suffixes = ([".rrd"] if loaded.output["record"] else []) + ([".obj", ".ply"] if loaded.output["mesh"] else [])
+    check_run_length(scene, loaded.frames, confirmed=getattr(args, "yes", False), label=str(scene_path))
+    suffixes = ([".rrd"] if loaded.output["record"] else []) + ([".obj", ".ply"] if loaded.output["mesh"] else []) \
+        + ([".png", "-pattern.png"] if getattr(args, "png", False) else [])
     stem = free_stem(out, loaded.name, suffixes)
     rec = None
     if loaded.output["record"]:
         from .recorder import Recorder
 
+        from .pattern_view import log_scene_pattern
+
         rec = Recorder(out / f"{stem}.rrd", recording_name=loaded.name, overwrite=True)
+        log_scene_pattern(rec, scene)
     summary = None
     try:
         summary = scene.run(loaded.frames, recorder=rec, progress=not getattr(args, "no_progress", False),
@@ -83,6 +93,10 @@ def run_scene_file(scene_path, args, quiet: bool = False):
                 out.mkdir(parents=True, exist_ok=True)
                 for suffix in (".obj", ".ply"):
                     summary.outputs.append(str(scene.export_mesh(out / f"{stem}{suffix}")))
+            if getattr(args, "png", False):
+                from .still import write_pictures
+
+                summary.outputs += [str(p) for p in write_pictures(scene, out / stem)]
     if not quiet:
         print(summary.format())
         if scene.controller("sewing") is not None:

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from clothbase.meshes import load_triangle_mesh
+from clothbase.meshes import load_triangle_mesh, open_mesh_warning
 from collision import MeshCollider, PrimitiveColliders
 from collision.self_collision import SelfCollision
 
@@ -59,6 +59,7 @@ def build_colliders(specs, base_dir: Path | None = None) -> list:
             else:
                 v, t = body_mesh(spec["path"], spec.get("scale", 1.0), spec.get("translate", (0.0, 0.0, 0.0)),
                                  base_dir)
+            open_mesh_warning(t, str(spec["path"]))
             out.append(MeshCollider(v, t, thickness=thickness, friction=friction, cell_size=spec.get("cell_size"),
                                     mode=spec.get("mode", "fuzzy"), repulsion=spec.get("repulsion"),
                                     source=str(spec["path"])))

@@ -40,13 +40,15 @@ class PinSpec:
     indices: particle indices;
     near:    points [m]; each pins the particle whose rest position is nearest to it;
     box:     ((xmin, ymin, zmin), (xmax, ymax, zmax)) [m]; pins every particle whose rest position is inside;
-    path:    None (fixed), keyframes [[t, dx, dy, dz], ...] or any callable t [s] -> offset (3,) [m].
+    path:    None (fixed), keyframes [[t, dx, dy, dz], ...] or any callable t [s] -> offset (3,) [m];
+    where:   what names the group in an error message (a scene file's "[[pins]] #2"), or "".
     """
 
     indices: Sequence[int] = ()
     near: Sequence[Sequence[float]] = ()
     box: tuple | None = None
     path: Callable[[float], np.ndarray] | Sequence | None = None
+    where: str = ""
 
     def __post_init__(self):
         if self.path is not None and not callable(self.path):
@@ -54,6 +56,12 @@ class PinSpec:
 
     def select(self, rest_positions: np.ndarray) -> np.ndarray:
         """Indices (sorted, unique) of the particles this spec pins."""
+        try:
+            return self._select(rest_positions)
+        except ValueError as exc:
+            raise ValueError(f"{self.where}: {exc}" if self.where else str(exc)) from None
+
+    def _select(self, rest_positions: np.ndarray) -> np.ndarray:
         P = len(rest_positions)
         chosen = [np.asarray(self.indices, dtype=np.int64).reshape(-1)]
         if len(chosen[0]) and (chosen[0].min() < 0 or chosen[0].max() >= P):

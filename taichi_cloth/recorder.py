@@ -217,6 +217,25 @@ class Recorder:
             rec.log(f"{path}/outline", rr.LineStrips3D([outline.astype(np.float32)], colors=[[20, 20, 20]],
                                                        radii=0.002), static=True)
 
+    def log_pattern(self, outlines: dict, corners, corner_names, sides, side_labels, side_colors) -> None:
+        """A garment's pattern as static 2D data under `pattern/` (taichi_cloth.pattern_view): outlines {piece name:
+        (n, 2) [m]} as pattern/pieces/<name>, corners (k, 2) [m] labelled corner_names as pattern/corners, seam
+        sides (list of (m, 2) [m], in pick order) as pattern/seams, labelled by seam number (a pair shares one),
+        with an arrow at each side's end for its direction (pattern/seams/directions)."""
+        rec = self.stream
+        for name, outline in outlines.items():
+            rec.log(f"pattern/pieces/{name}", rr.LineStrips2D([np.asarray(outline, np.float32)], colors=[[60, 60, 60]],
+                                                              labels=[name]), static=True)
+        rec.log("pattern/corners", rr.Points2D(np.asarray(corners, np.float32), labels=list(corner_names),
+                                               colors=[[0, 0, 0]], radii=0.004), static=True)
+        sides = [np.asarray(s, np.float32) for s in sides]
+        rec.log("pattern/seams", rr.LineStrips2D(sides, labels=list(side_labels), colors=list(side_colors),
+                                                 radii=0.004), static=True)
+        tails = [s[max(0, len(s) - 3)] for s in sides]
+        arrows = rr.Arrows2D(origins=tails, vectors=[s[-1] - t for s, t in zip(sides, tails)], colors=list(side_colors),
+                             radii=0.004)
+        rec.log("pattern/seams/directions", arrows, static=True)
+
     def log_points(self, entity: str, points, radius: float = 0.01, color=PIN_COLOR, static: bool = True) -> None:
         """Extra points (e.g. markers), static by default."""
         self.stream.log(entity, rr.Points3D(np.asarray(points, np.float32), radii=radius, colors=color), static=static)

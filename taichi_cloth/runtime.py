@@ -43,8 +43,27 @@ def init(arch: str = "cpu", parallel_from: int | None = None, **kwargs) -> None:
         return
     kwargs.setdefault("offline_cache", True)
     kwargs.setdefault("log_level", ti.WARN)
-    ti.init(arch=_ARCHS[arch], **kwargs)
+    ti.init(arch=gpu_arch() if arch == "gpu" else _ARCHS[arch], **kwargs)
     _current_arch = arch
+
+
+#: the GPU backends tried for arch "gpu", in Taichi's order less OpenGL: probing OpenGL on a machine without a
+#: display or GPU driver crashes the process (a segmentation fault inside ti.init(arch=ti.gpu), Taichi 1.7.4),
+#: and every GPU that OpenGL could reach has a Vulkan driver too
+GPU_ARCHS = ("cuda", "vulkan", "metal")
+
+
+def gpu_arch():
+    """The first GPU backend of GPU_ARCHS this machine supports, or ti.cpu with one warning line when none is."""
+    from taichi.lang.misc import is_arch_supported
+
+    from clothbase.errors import warn
+
+    for name in GPU_ARCHS:
+        if is_arch_supported(getattr(ti, name)):
+            return getattr(ti, name)
+    warn("no GPU found (no CUDA, Vulkan or Metal device): running on the CPU")
+    return ti.cpu
 
 
 def serial_loops(n_particles: int) -> bool:

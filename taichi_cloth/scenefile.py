@@ -80,6 +80,7 @@ from pathlib import Path
 from .assembly import STEP_GUARDS
 from .builder import ClothBuilder
 from .errors import MeshError, PatternError, SceneError
+from .guards import check_memory, check_precision, grid_particles
 from .integrators import INTEGRATORS
 from .quality import QUALITIES
 from .scene import Scene
@@ -224,6 +225,9 @@ def parse_scene(source: str | Path | dict, base_dir: Path | None = None, label: 
             v.fail("[body]", f"names no girth: give at least one of {', '.join(BODY_GIRTHS)} [m]")
         if not any(c["type"] == "mesh" and c.get("path") == "mannequin" for c in cfg["colliders"]):
             v.fail("[body]", "morphs the mannequin: add [[colliders]] type = \"mesh\", path = \"mannequin\"")
+    size = grid_particles(cfg)
+    if size is not None:
+        check_memory(size[0], f"{label}: {size[1]}")  # before numpy or Taichi allocates any of it
     return cfg
 
 
@@ -294,13 +298,16 @@ def build_scene(cfg: dict) -> Scene:
     except MeshError as exc:
         raise SceneError(f"{label}: [cloth.mesh] path: {exc}") from None
     except PatternError as exc:
-        raise SceneError(f"{label}: [cloth] garment: {exc}") from None
+        garment = str(cloth_cfg.get("garment"))
+        named = f" {garment}" if cloth_cfg.get("garment") is not None and garment not in str(exc) else ""
+        raise SceneError(f"{label}: [cloth] garment{named}: {exc}") from None
     integ = dict(cfg["integrator"])
     name, dt, guard = integ.pop("name"), integ.pop("dt"), integ.pop("step_guard")
     adaptive = {k: val for k, val in (integ.pop("adaptive", None) or {}).items() if val is not None}
     pins = [dict(indices=p["indices"], near=p["near"],
-                 box=(p["box"]["min"], p["box"]["max"]) if p.get("box") else None, path=p["keyframes"])
-            for p in cfg["pins"]]
+                 box=(p["box"]["min"], p["box"]["max"]) if p.get("box") else None, path=p["keyframes"],
+                 where=f"[[pins]] #{k + 1}")
+            for k, p in enumerate(cfg["pins"])]
     try:
         return Scene(data, name=cfg["name"], integrator=name, dt=dt, integrator_options=integ,
                      adaptive=adaptive if dt == "auto" else None,
@@ -403,4 +410,18 @@ def load_scene(source: str | Path | dict, *, frames: int | None = None, integrat
         cfg["precision"] = v.value(Field("str", choices=("f32", "f64")), precision, "--precision")
     if out is not None:
         cfg["output"]["dir"] = str(out)
-    return LoadedScene(build_scene(cfg), cfg["name"], cfg["frames"], cfg["output"], cfg)
+    check_output_dir(cfg["output"]["dir"], cfg["_label"])
+    scene = build_scene(cfg)
+    check_precision(scene, cfg["precision"], cfg["_label"])
+    return LoadedScene(scene, cfg["name"], cfg["frames"], cfg["output"], cfg)
+
+
+def check_output_dir(path: str | Path, label: str) -> None:
+    """Refuse (SceneError) an output folder that cannot be one: a file, or below a file."""
+    p = Path(path)
+    for q in (p, *p.parents):
+        if q.exists():
+            if not q.is_dir():
+                where = "is a file" if q == p else f"lies below the file {q}"
+                raise SceneError(f"{label}: [output] dir {str(path)!r} {where}, not a folder")
+            return

@@ -102,8 +102,11 @@ def run(args) -> int:
         girths = {n: v for n, v in girths.items() if v is not None}
         if not girths:
             raise BodyError("no girth given: use e.g. --chest 96 --waist 74 --hips 100 (cm), or --ranges")
+        for name, cm in girths.items():  # checked here, in the unit typed (fit_body speaks in metres)
+            if not cm > 0 or cm == float("inf"):
+                raise BodyError(f"--{name.replace('_', '-')} must be a positive girth in cm, got {cm:g}")
         tolerance = getattr(args, "tolerance", 0.1)
-        if not tolerance > 0:
+        if not 0 < tolerance < float("inf"):
             raise BodyError(f"--tolerance must be a positive length in cm, got {tolerance:g}")
         fit, path = make_body(girths, getattr(args, "out", DEFAULT_OUT), tolerance)
     except (BodyError, MeshError, OSError) as err:

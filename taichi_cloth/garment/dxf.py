@@ -12,8 +12,10 @@ Reading (`read_dxf`):
     ELLIPSE -> rational "bspline"; LWPOLYLINE / 2D or 3D POLYLINE:
       - closed (flag, or last vertex == first) -> one "line"/"arc" segment per edge, every vertex a corner;
       - open with bulges -> one "line"/"arc" segment per edge;
-      - open without bulges -> ONE "polyline" segment (interior vertices are not corners), so that polyline
-        segments survive a write/read round trip.
+      - open without bulges -> "polyline" segments split at every vertex where the outline turns by more than
+        CORNER_TURN degrees (a tangent break: the hem corners of a side-hem-side polyline), each a corner; the
+        smooth interior vertices of a curve drawn as a polyline are not corners, so that polyline segments
+        survive a write/read round trip. (Pattern CAD marks corners as polyline vertices or sharp turns.)
     TEXT / MTEXT whose insertion (or alignment) point lies on a corner (within tolerance) names that corner.
     Everything else (POINT, HATCH, DIMENSION, ...) is ignored.
   * Open entities on a layer are chained end to end (endpoints matched within tolerance, reversed as needed)
@@ -251,10 +253,25 @@ def _vertex_chunks(pts, bulges, closed: bool, flip: bool, scale: float, tol: flo
         return []
     if not closed and all(bu == 0 for _, _, bu in edges):
         poly = np.array([edges[0][0]] + [b for _, b, _ in edges])
-        return [_Chunk([Segment("polyline", poly)], source)]
+        return [_Chunk(_split_at_turns(poly), source)]
     segs = [Segment("arc", np.array([a, b]), bulge=bu) if bu != 0 else Segment("line", np.array([a, b]))
             for a, b, bu in edges]
     return [_Chunk(segs, source, closed=closed)]
+
+
+#: [deg] a polyline vertex where the outline turns by more than this is a corner (a tangent break); a curve drawn
+#: as a polyline turns less at each vertex (a circle needs only 8 vertices to stay below it)
+CORNER_TURN = 45.0
+
+
+def _split_at_turns(poly: np.ndarray) -> list:
+    """Segments of an open polyline (n, 2) [m], split at the interior vertices that turn by more than CORNER_TURN:
+    "polyline" pieces, or "line" where a piece is one edge."""
+    d = np.diff(poly, axis=0)
+    d = d / np.linalg.norm(d, axis=1, keepdims=True)
+    cos_turn = np.einsum("ij,ij->i", d[:-1], d[1:])
+    cuts = [0] + [i + 1 for i in np.nonzero(cos_turn < math.cos(math.radians(CORNER_TURN)))[0]] + [len(poly) - 1]
+    return [Segment("line" if b - a == 1 else "polyline", poly[a:b + 1]) for a, b in zip(cuts, cuts[1:])]
 
 
 def _polyline_chunks(e, scale: float, tol: float) -> list:

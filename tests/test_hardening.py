@@ -1,0 +1,240 @@
+"""Bad input as a user gives it: each kind gets one `error:` line (exit 2) or one `warning:` line, never a traceback
+or a crash. The CLI cases run `python -m taichi_cloth` in a subprocess."""
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import ezdxf
+import numpy as np
+import pytest
+
+from taichi_cloth import guards
+from taichi_cloth.errors import SceneError
+from taichi_cloth.garment.dxf import read_dxf
+
+ROOT = Path(__file__).resolve().parents[1]
+
+GRID = """
+name = "t"
+frames = {frames}
+[cloth]
+{material}
+[cloth.grid]
+size = [1.0, 1.0]
+resolution = [{res}, {res}]
+center = [0.0, 1.5, 0.0]
+plane = "xz"
+[integrator]
+name = "{integrator}"
+dt = {dt}
+[output]
+dir = "{out}"
+record = false
+mesh = false
+"""
+
+
+def scene_file(tmp_path, name="scene.toml", res=6, frames=1, dt=0.001, integrator="explicit", out=None,
+               material='material = "cotton"', extra=""):
+    path = tmp_path / name
+    path.write_text(GRID.format(res=res, frames=frames, dt=dt, integrator=integrator, material=material,
+                                out=out or (tmp_path / "out").as_posix()) + extra)
+    return path
+
+
+def cli(*args, cwd=None, timeout=300):
+    """(exit code, stdout, stderr lines other than Taichi's own banner and log lines)."""
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    done = subprocess.run([sys.executable, "-m", "taichi_cloth", *map(str, args)], capture_output=True, text=True,
+                          cwd=cwd or ROOT, env=env, timeout=timeout)
+    noise = ("[Taichi]", "[W ", "[I ")
+    err = [line for line in done.stderr.splitlines() if line.strip() and not line.startswith(noise)]
+    return done.returncode, done.stdout, err
+
+
+def one_error(rc, err, *words):
+    assert rc == 2, err
+    assert len(err) == 1 and err[0].startswith("error: "), err
+    for w in words:
+        assert w in err[0], err[0]
+    return err[0]
+
+
+# ------------------------------------------------------------------------------------------------ resources
+@pytest.mark.parametrize("res, particles", [(30000, "900,000,000"), (100000, "10,000,000,000")])
+def test_a_huge_grid_is_refused_before_anything_is_allocated(tmp_path, res, particles):
+    rc, _, err = cli("run", scene_file(tmp_path, res=res), "--no-progress")
+    one_error(rc, err, f"[cloth.grid] resolution {res} x {res}", f"{particles} particles need about",
+              "TiB of memory (estimate", "available; use a coarser resolution")
+
+
+def test_memory_guard_against_a_given_machine():
+    guards.check_memory(1000, "x", available=1000 * guards.BYTES_PER_PARTICLE)  # fits exactly
+    with pytest.raises(SceneError, match=r"^x: 1,001 particles need about 5.87 MiB .* this machine has 5.86 MiB"):
+        guards.check_memory(1001, "x", available=1000 * guards.BYTES_PER_PARTICLE)
+
+
+def test_a_tiny_step_is_refused_with_its_count_and_time(tmp_path):
+    path = scene_file(tmp_path, dt=1e-12, frames=2)
+    rc, _, err = cli("run", path, "--no-progress")
+    one_error(rc, err, "the run is too long: 2 frames of 16,666,650,000 steps (dt = 1e-12 s) = 33,333,300,000 steps",
+              "on this CPU (estimate)", "more than 10,000,000 steps needs --yes")
+
+
+def test_a_long_run_is_announced_and_runs_with_yes(tmp_path):
+    # 20 frames of 2,000,000 steps: refused without --yes, announced with it (and stopped by the timeout here)
+    path = scene_file(tmp_path, dt=1e-8, frames=20)
+    rc, _, err = cli("run", path, "--no-progress")
+    one_error(rc, err, "= 33,333,300 steps", "needs --yes")
+    env = dict(os.environ, PYTHONPATH=str(ROOT), PYTHONUNBUFFERED="1")
+    proc = subprocess.Popen([sys.executable, "-m", "taichi_cloth", "run", str(path), "--no-progress", "--yes"],
+                            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, cwd=ROOT, env=env)
+    try:
+        line = next(text for text in proc.stdout if not text.startswith("[Taichi]"))
+    finally:
+        proc.kill()
+        proc.wait()
+    assert line.startswith("this run takes 20 frames of 1,666,665 steps (dt = 1e-08 s) = 33,333,300 steps, about ")
+
+
+# ------------------------------------------------------------------------------------------------ precision
+STIFF = 'material = { preset = "cotton", stretch = 1e14, shear = 1e14 }'
+
+
+def test_f32_refuses_a_stiffness_it_cannot_resolve(tmp_path):
+    path = scene_file(tmp_path, res=8, integrator="implicit", dt=0.016666667, material=STIFF)
+    rc, _, err = cli("run", path, "--no-progress")
+    one_error(rc, err, "f32 cannot resolve this step: h^2 k / m = ", "exceeds 8.39e+05 = 0.1 / f32 epsilon",
+              'use precision = "f64" (--precision f64)')
+
+
+def test_stiffness_ratio_reads_the_stiffest_spring_against_the_lightest_particle(tmp_path):
+    import taichi_cloth as tc
+
+    loaded = tc.load_scene(scene_file(tmp_path, res=8, integrator="implicit", dt=0.01, material=STIFF),
+                           precision="f64")
+    d = loaded.scene.model.data
+    m = np.minimum(d.mass[d.springs[:, 0]], d.mass[d.springs[:, 1]])
+    assert guards.stiffness_ratio(loaded.scene) == pytest.approx(float(np.max(1e-4 * d.stiffness / m)), rel=1e-12)
+    assert guards.stiffness_ratio(loaded.scene) > 0.1 / guards.EPSILON["f32"]  # f64 accepted it (no error)
+    with pytest.raises(SceneError, match="f32 cannot resolve this step"):
+        guards.check_precision(loaded.scene, "f32")
+
+
+def test_demo_scenes_are_far_inside_the_f32_limit():
+    import taichi_cloth as tc
+
+    loaded = tc.load_scene(ROOT / "demos/scenes/hanging_cloth.toml")
+    assert guards.stiffness_ratio(loaded.scene) * guards.EPSILON["f32"] < 1e-2 * guards.MASS_DIGITS
+
+
+# ------------------------------------------------------------------------------------------------ meshes
+COLLIDER = '\n[[colliders]]\ntype = "mesh"\npath = "{path}"\n'
+
+
+def test_an_open_collider_mesh_warns_that_it_is_one_sided(tmp_path):
+    (tmp_path / "open.obj").write_text("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3\nf 1 3 4\n")
+    path = scene_file(tmp_path, extra=COLLIDER.format(path="open.obj"))
+    rc, _, err = cli("run", path, "--no-progress")
+    assert rc == 0, err
+    assert err == ["warning: open.obj: the collider mesh is open (4 boundary edges, not watertight): "
+                   "it acts as a one-sided collider; cloth that passes an edge or a hole is not pushed back out, "
+                   "since an open mesh has no inside"]
+
+
+@pytest.mark.parametrize("name, content, words", [
+    ("latin.obj", b"h\xe9llo w\xf6rld\nthis is no mesh\n", "unreadable as a mesh: no vertices found in it"),
+    ("notes.stl", b"just some text\n", "unreadable as a mesh"),
+    ("pattern.dxf", (ROOT / "demos/garments/top.dxf").read_bytes(), "unreadable as a mesh: a DXF file holds 2D "
+                                                                     "pattern outlines, not triangles"),
+])
+def test_an_unreadable_mesh_file_is_reported_as_unreadable(tmp_path, name, content, words):
+    (tmp_path / name).write_bytes(content)
+    path = scene_file(tmp_path, extra=COLLIDER.format(path=name))
+    rc, _, err = cli("run", path, "--no-progress")
+    line = one_error(rc, err, str(tmp_path / name), words)
+    assert "charset_normalizer" not in line and "reshape" not in line
+
+
+def test_the_text_decoder_of_the_mesh_reader_is_installed():
+    import charset_normalizer  # noqa: F401  (trimesh decodes non-UTF-8 text meshes with it)
+
+
+# ------------------------------------------------------------------------------------------------ no GPU
+def test_gpu_without_a_gpu_falls_back_to_the_cpu_with_one_line(tmp_path):
+    pytest.importorskip("taichi")
+    from taichi.lang.misc import is_arch_supported
+    import taichi as ti
+
+    if any(is_arch_supported(a) for a in (ti.cuda, ti.vulkan, ti.metal)):
+        pytest.skip("this machine has a GPU")
+    rc, out, err = cli("run", scene_file(tmp_path), "--no-progress", "--arch", "gpu")
+    assert rc == 0, err  # not 139 (the segmentation fault of probing OpenGL)
+    assert err == ["warning: no GPU found (no CUDA, Vulkan or Metal device): running on the CPU"]
+    assert "ran 1 frames" in out
+
+
+# ------------------------------------------------------------------------------------------------ paths
+def test_an_output_dir_that_is_a_file_is_refused_before_the_scene_is_built(tmp_path):
+    (tmp_path / "taken").write_text("a file")
+    rc, _, err = cli("run", scene_file(tmp_path, out=(tmp_path / "taken").as_posix()), "--no-progress")
+    one_error(rc, err, f"[output] dir '{(tmp_path / 'taken').as_posix()}' is a file, not a folder")
+    rc, _, err = cli("run", scene_file(tmp_path, out=(tmp_path / "taken" / "sub").as_posix()), "--no-progress")
+    one_error(rc, err, f"lies below the file {tmp_path / 'taken'}")
+
+
+# ------------------------------------------------------------------------------------------------ messages
+@pytest.mark.parametrize("flag, value", [("--waist", "-5"), ("--waist", "0"), ("--hips", "nan"),
+                                         ("--upper-arm", "inf")])
+def test_body_girth_messages_speak_in_centimetres(tmp_path, flag, value):
+    rc, _, err = cli("body", flag, value, "--out", tmp_path / "b.obj")
+    one_error(rc, err, f"{flag} must be a positive girth in cm, got {value}")
+
+
+def test_a_pin_error_names_its_group(tmp_path):
+    extra = "\n[[pins]]\nindices = [0]\n[[pins]]\nbox = { min = [5.0, 5.0, 5.0], max = [6.0, 6.0, 6.0] }\n"
+    rc, _, err = cli("run", scene_file(tmp_path, extra=extra), "--no-progress")
+    one_error(rc, err, "[[pins]] #2: pin box [5.0, 5.0, 5.0]..[6.0, 6.0, 6.0] contains no particle")
+
+
+def test_a_seam_corner_error_names_the_garment_file(tmp_path):
+    garments = ROOT / "demos/garments"
+    (tmp_path / "top.dxf").write_bytes((garments / "top.dxf").read_bytes())
+    text = (garments / "top_dxf.toml").read_text().replace('from = "hem_L", to = "arm_L" }',
+                                                            'from = "hem_X", to = "arm_L" }', 1)
+    (tmp_path / "bad.toml").write_text(text)
+    scene = (ROOT / "demos/scenes/sew_tshirt.toml").read_text().replace("../garments/tshirt.toml", "bad.toml")
+    (tmp_path / "scene.toml").write_text(scene)
+    rc, _, err = cli("run", tmp_path / "scene.toml", "--no-progress", "--frames", "1")
+    one_error(rc, err, "[cloth] garment bad.toml: seam 'left side': pattern piece 'front': no corner 'hem_X'")
+
+
+# ------------------------------------------------------------------------------------------------ DXF corners
+def test_dxf_corners_of_a_polyline_chained_with_a_spline(tmp_path):
+    """side - hem - side as ONE open polyline, the top a spline: the hem corners are polyline vertices (90-degree
+    turns) and become corners; a gently curved polyline keeps its vertices inside one segment."""
+    doc = ezdxf.new("R2010")
+    doc.units = 5  # cm
+    msp = doc.modelspace()
+    msp.add_lwpolyline([(0, 60), (0, 0), (40, 0), (40, 60)], dxfattribs={"layer": "front"})
+    msp.add_open_spline([(40, 60, 0), (30, 70, 0), (10, 70, 0), (0, 60, 0)], degree=3, dxfattribs={"layer": "front"})
+    msp.add_text("hem_L", dxfattribs={"layer": "front", "insert": (0, 0)})
+    msp.add_text("hem_R", dxfattribs={"layer": "front", "insert": (40, 0)})
+    # a curve drawn as a polyline (turns of 20 degrees) closed by a line
+    arc = [(20 * np.cos(a), 20 * np.sin(a)) for a in np.radians(np.arange(0, 181, 20))]
+    msp.add_lwpolyline(arc, dxfattribs={"layer": "round"})
+    msp.add_line(arc[-1], arc[0], dxfattribs={"layer": "round"})
+    doc.saveas(tmp_path / "chained.dxf")
+    pieces = {p.name: p for p in read_dxf(tmp_path / "chained.dxf")}
+    front = pieces["front"]
+    assert front.corner_names == ["c0", "hem_L", "hem_R", "c3", ] and front.n_corners == 4
+    assert [s.kind for s in front.segments] == ["line", "line", "line", "bspline"]
+    np.testing.assert_allclose(front.corners, [[0, 0.6], [0, 0], [0.4, 0], [0.4, 0.6]], atol=1e-12)
+    assert [s.kind for s in pieces["round"].segments] == ["polyline", "line"]
+    # a seam can now be picked along the hem
+    from taichi_cloth.garment.seams import Seam, SeamSide, route
+
+    hem = route(front, Seam("hem", SeamSide("front", "hem_L", "hem_R"), SeamSide("front", "hem_L", "hem_R")),
+                SeamSide("front", "hem_L", "hem_R"), np.array([s.length() for s in front.segments]))
+    assert hem.segments == (1,) and hem.forward and hem.length == pytest.approx(0.4)
