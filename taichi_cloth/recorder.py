@@ -66,7 +66,7 @@ class _Batch:
 
 @dataclass
 class _Shown:
-    """What the blueprint shows of one cloth entity: its SceneLayout, and its box [m] at its first frame (the
+    """What the blueprint shows of one cloth entity: its SceneLayout, and its box [m] at its last frame logged (the
     translation applied), (3,) lo and hi, None before."""
 
     layout: object
@@ -89,6 +89,18 @@ def _collider_names(colliders: list) -> list[str]:
         seen[base] = seen.get(base, 0) + 1
         names.append(base if seen[base] == 1 else f"{base}_{seen[base]}")
     return names
+
+
+def _vertex_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """(V,3) float32 area-weighted unit vertex normals of a (V,3) [m], (T,3) mesh: without them the viewer draws a
+    mesh unlit, a flat silhouette."""
+    v = np.asarray(vertices, np.float64)
+    a, b, c = (v[triangles[:, k]] for k in range(3))
+    face = np.cross(b - a, c - a)
+    n = np.zeros_like(v)
+    for k in range(3):
+        np.add.at(n, triangles[:, k], face)
+    return (n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-20)).astype(np.float32)
 
 
 def _quaternion_z_to(direction) -> list:
@@ -120,6 +132,7 @@ class Recorder:
         self._segments: dict[str, set] = {}  # entity -> the segment entity paths logged last
         self._colliders: dict[str, list] = {}  # entity -> the entity path of each collider
         self._shown: dict[str, _Shown] = {}  # entity -> what the blueprint frames and plots
+        self._framed = None  # the box [m] (lo, hi) the blueprint sent last frames
         self.stream = rr.RecordingStream(application_id)
         self.stream.save(str(self.path))
         if recording_name:
@@ -154,9 +167,9 @@ class Recorder:
         if description["kind"] == "self":
             return
         if description["kind"] == "mesh":
-            rec.log(entity, rr.Mesh3D(vertex_positions=np.asarray(description["vertices"], np.float32),
-                                      triangle_indices=np.asarray(description["triangles"], np.uint32),
-                                      albedo_factor=BODY_COLOR), static=static)
+            v, tri = np.asarray(description["vertices"], np.float32), np.asarray(description["triangles"], np.int64)
+            rec.log(entity, rr.Mesh3D(vertex_positions=v, triangle_indices=tri.astype(np.uint32),
+                                      vertex_normals=_vertex_normals(v, tri), albedo_factor=BODY_COLOR), static=static)
             return
         if description["spheres"]:
             rec.log(f"{entity}/spheres", rr.Ellipsoids3D(
@@ -218,10 +231,12 @@ class Recorder:
             values.append(np.atleast_1d(np.asarray(value, np.float64)))
         self.log_events(entity, frame.frame, frame.t, frame.events)
         shown = self._shown.get(entity)
-        if shown is not None and shown.lo is None and len(frame.positions):
-            x = np.asarray(frame.positions, np.float64) + shown.translation
-            shown.lo, shown.hi = x.min(axis=0), x.max(axis=0)
-            self.stream.send_blueprint(self._blueprint())  # framed on every cloth begun so far
+        if shown is not None and len(frame.positions):
+            first = shown.lo is None
+            x = np.asarray(frame.positions)
+            shown.lo, shown.hi = x.min(axis=0) + shown.translation, x.max(axis=0) + shown.translation
+            if first:  # a layout from the start (kept if the run dies), framed anew at close() on the last frame
+                self._send_blueprint()
         self.frames_logged += 1
         if len(batch.frames) >= BATCH_FRAMES or any(len(f) >= BATCH_FRAMES for f, _, _ in batch.scalars.values()):
             self._send(entity)
@@ -258,13 +273,21 @@ class Recorder:
             self.stream.log(path, rr.Clear(recursive=False))
         self._segments[entity] = now
 
-    def _blueprint(self) -> rrb.Blueprint:
-        """The default layout: the 3D view (front camera framing the first frame of every cloth) with the pattern
-        as a tab for garments and the strain legend below, the grouped plots and the events beside it."""
+    def _send_blueprint(self) -> None:
+        """Send the default layout when the box it frames changed since it was sent last."""
+        framed = [s for s in self._shown.values() if s.lo is not None]
+        if not framed:
+            return
+        box = (np.min([s.lo for s in framed], axis=0), np.max([s.hi for s in framed], axis=0))
+        if self._framed is None or not all(np.allclose(a, b, atol=1e-3) for a, b in zip(box, self._framed)):
+            self.stream.send_blueprint(self._blueprint(*box))
+            self._framed = box
+
+    def _blueprint(self, lo: np.ndarray, hi: np.ndarray) -> rrb.Blueprint:
+        """The default layout: the 3D view (a camera in front (+z) framing the box lo..hi [m] of every cloth's
+        last frame: the viewer opens a recording at its end) with the pattern as a tab for garments and the strain
+        legend below, the grouped plots and the events beside it."""
         shown = self._shown
-        framed = [s for s in shown.values() if s.lo is not None]
-        lo = np.min([s.lo for s in framed], axis=0)
-        hi = np.max([s.hi for s in framed], axis=0)
         center, size = 0.5 * (lo + hi), np.maximum(hi - lo, 0.05)
         # the distance at which the box's front face fills the view (with a margin), from the front (+z)
         half = 0.5 * max(size[1], size[0] / VIEW_ASPECT) * 1.25
@@ -272,6 +295,7 @@ class Recorder:
         eye = rrb.EyeControls3D(position=(center + [0.0, 0.1 * size[1], distance]).tolist(),
                                 look_target=center.tolist(), eye_up=[0.0, 1.0, 0.0])
         scene = rrb.Spatial3DView(name="scene", origin="/", eye_controls=eye,
+                                  background=rrb.BackgroundKind.GradientDark,  # the white of no strain stands out
                                   contents=["+ /**", "- /metrics/**", f"- /{LEGEND}/**", "- /pattern/**"])
         if any(s.layout.garment for s in shown.values()):
             scene = rrb.Tabs(scene, rrb.Spatial2DView(name="pattern", origin="/pattern"), active_tab=0)
@@ -388,7 +412,9 @@ class Recorder:
         self.stream.flush()
 
     def close(self) -> None:
-        """Flush and finish the file (writes the footer); the recorder cannot be used afterwards."""
+        """Frame the 3D view on where the cloths went, flush and finish the file (writes the footer); the recorder
+        cannot be used afterwards."""
+        self._send_blueprint()
         self.flush()
         self.stream.disconnect()
 

@@ -7,9 +7,9 @@ the recordings already there), serves its recording with the viewer that rerun-s
 --serve-web`, on 127.0.0.1 and two free ports), opens it in headless Chromium with software WebGL (SwiftShader)
 through playwright, waits until the page stops changing, and writes a screenshot to SHOTS/view-<name>.png
 (docs/ by default). The 3D panel of the default blueprint (the left ~57 % of the window, above the legend) must
-show the cloth: at least MIN_CLOTH_SHARE of its pixels in the cloth's warm colours (the strain map's white to red
-is told from the white of the viewer's text by being lit, i.e. not pure; the plain cloth is orange-red), and its
-brightness far from uniform (standard deviation over MIN_SPREAD of 255). Prints one line per demo; exit 1 if
+show the cloth: at least MIN_CLOTH_SHARE of its pixels in the cloth's colours (cloth_pixels: the strain map's
+white to red, the plain cloth's orange-red; the body is bluish grey, the background dark), and its brightness far
+from uniform (standard deviation over MIN_SPREAD of 255). Prints one line per demo; exit 1 if
 any check fails, 2 if the browser or the viewer cannot be started.
 
 Needs /usr/bin/chromium (Debian's `chromium`; `make view-check` installs it) and the `view` extra (playwright,
@@ -35,7 +35,7 @@ WINDOW = (1600, 1000)
 #: the 3D panel of the default blueprint as fractions of the window (x0, y0, x1, y1): left column, above the legend
 PANEL_3D = (0.01, 0.07, 0.57, 0.80)
 #: the cloth's pixels must be at least this share of the 3D panel, and its brightness spread (std, of 255) this much
-MIN_CLOTH_SHARE, MIN_SPREAD = 0.01, 12.0
+MIN_CLOTH_SHARE, MIN_SPREAD = 0.03, 12.0
 #: the longest wait [s] for the viewer to load a recording and stop changing
 LOAD_TIMEOUT = 120.0
 CHROMIUM = "/usr/bin/chromium"
@@ -61,11 +61,11 @@ class PanelCheck:
 
 
 def cloth_pixels(rgb: np.ndarray) -> np.ndarray:
-    """(H,W) bool: the pixels of a (H,W,3) uint8 image in the cloth's colours: warm (red over blue by 40 or more,
-    red at least green), the strain map's white to red and the plain cloth's orange-red, lit (so, e.g., the body's
-    grey, the background and the viewer's white text are not)."""
+    """(H,W) bool: the pixels of a (H,W,3) uint8 image in the cloth's colours, lit: bright (red 120 or more) and
+    red >= green >= blue, as the strain map's white to red and the plain cloth's orange-red are (the body's grey is
+    bluish, the 3D view's background dark)."""
     r, g, b = (rgb[..., c].astype(np.int16) for c in range(3))
-    return (r >= 110) & (r - b >= 40) & (r >= g)
+    return (r >= 120) & (r >= g) & (g >= b)
 
 
 def check_panel(png: Path) -> PanelCheck:

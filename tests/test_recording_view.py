@@ -15,7 +15,8 @@ from taichi_cloth.strain import STRAIN_STOPS, strain_colormap
 
 def _columns(chunk) -> dict:
     rb = chunk.to_record_batch()
-    return {k: rb.column(k).to_pylist() for k in rb.schema.names if k not in ("rerun.controls.RowId", "log_time", "sim_time")}
+    skip = ("rerun.controls.RowId", "log_time", "sim_time")  # pyarrow cannot make Python objects of ns times
+    return {k: rb.column(k).to_pylist() for k in rb.schema.names if k not in skip}
 
 
 def read_back(path):
@@ -24,9 +25,12 @@ def read_back(path):
     recording = {}
     for chunk in reader.stream():
         recording.setdefault(chunk.entity_path, []).append((chunk.is_static, _columns(chunk)))
-    blueprints = reader.blueprints()
-    assert len(blueprints) == 1
-    blueprint = {chunk.entity_path: _columns(chunk) for chunk in reader.stream(store=blueprints[0])}
+    sent = []  # (when, blueprint) per blueprint in the file: the viewer shows the last one sent
+    for store in reader.blueprints():
+        chunks = list(reader.stream(store=store))
+        when = max(max(c.to_record_batch().column("log_time").cast("int64").to_pylist()) for c in chunks)
+        sent.append((when, {chunk.entity_path: _columns(chunk) for chunk in chunks}))
+    blueprint = max(sent, key=lambda s: s[0])[1]
     return recording, blueprint
 
 
@@ -127,8 +131,8 @@ def test_pieces_seams_and_body_are_entities_of_their_own_until_the_merge(garment
         assert any("Clear:is_recursive" in c for _, c in chunks)  # gone at the merge
     mesh = [c for _, c in recording["/cloth/mesh"] if "Mesh3D:triangle_indices" in c]
     assert mesh[0]["Mesh3D:triangle_indices"][0] == [[0, 1, 2], [1, 3, 2], [4, 5, 0]] and mesh[0]["frame"] == [1]
-    seam = recording["/cloth/seams/left\\ side"]
-    assert [c["frame"] for _, c in seam] == [[0], [1]] and "LineStrips3D:strips" in seam[0][1]
+    seam = sorted((c["frame"], c) for _, c in recording["/cloth/seams/left\\ side"])  # the chunks in time order
+    assert [f for f, _ in seam] == [[0], [1]] and "LineStrips3D:strips" in seam[0][1]
     assert "Clear:is_recursive" in seam[1][1]
     assert "Mesh3D:vertex_positions" in recording["/cloth/body"][0][1]
 
@@ -145,3 +149,15 @@ def test_a_plain_cloth_has_no_pattern_and_no_legend(tmp_path):
     assert "/legend/strain" not in recording
     mesh = [c for _, c in recording["/cloth/mesh"] if "Mesh3D:triangle_indices" in c][0]
     assert mesh["Mesh3D:albedo_factor"][0] != [0xFFFFFFFF]  # the cloth's own colour
+
+
+def test_the_camera_is_framed_anew_at_close_on_where_the_cloth_went(tmp_path):
+    layout = SceneLayout("falling", False, {"energy": ["kinetic", "potential", "total"]})
+    x = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], np.float32)
+    with Recorder(tmp_path / "moved.rrd") as rec:
+        rec.begin_cloth("cloth", layout)
+        for frame, shift in enumerate((0.0, 1.0, 3.0)):
+            rec.log_frame("cloth", FrameSnapshot(frame, frame / 60, x + [shift, 0, 0], np.zeros_like(x),
+                                                 np.array([[0, 1, 2]]), 0))
+    eye = views(read_back(tmp_path / "moved.rrd")[1])["scene"][3]
+    np.testing.assert_allclose(eye["EyeControls3D:look_target"][0][0], [3.5, 0.5, 0.0], atol=1e-6)
