@@ -40,7 +40,7 @@ LEGEND = "legend/strain"
 PLOTS = (("energy", "energy [J]"), ("strain", "max strain [-]"), ("seam_gap", "seam gap [mm]"),
          ("speed", "max speed [m/s]"), ("level", "level"))
 #: the viewer's vertical field of view [deg] and the 3D view's width / height in the default blueprint
-CAMERA_FOV_Y, VIEW_ASPECT = 55.0, 1.3
+CAMERA_FOV_Y, VIEW_ASPECT = 55.0, 1.1
 
 CLOTH_COLOR = (200, 90, 60, 255)
 WHITE = (255, 255, 255, 255)  # the albedo of a mesh with vertex colours (the albedo multiplies them)
