@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import signal
 import socket
 import subprocess
 import sys
@@ -102,12 +103,26 @@ def serve(rrd: Path, log) -> tuple[subprocess.Popen, str]:
     rerun = Path(sys.executable).with_name("rerun")
     cmd = [str(rerun) if rerun.exists() else "rerun", str(rrd), "--serve-web", "--bind", "127.0.0.1",
            "--port", str(grpc), "--web-viewer-port", str(web)]
-    proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=dict(os.environ, RERUN_ANALYTICS="0"))
+    # a session of its own: the `rerun` script runs the viewer's binary as its child, and stop() ends both
+    proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, start_new_session=True,
+                            env=dict(os.environ, RERUN_ANALYTICS="0"))
     if not (_wait_for(grpc, 30) and _wait_for(web, 30)):
-        proc.terminate()
+        stop(proc)
         raise RuntimeError(f"the viewer did not start serving {rrd} (its log: {log.name})")
     url = f"http://127.0.0.1:{web}/?url=rerun%2Bhttp%3A%2F%2F127.0.0.1%3A{grpc}%2Fproxy"
     return proc, url
+
+
+def stop(proc: subprocess.Popen) -> None:
+    """End a server started by serve(), its child processes too."""
+    try:
+        os.killpg(proc.pid, signal.SIGTERM)
+        proc.wait(10)
+    except ProcessLookupError:
+        pass
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
 
 
 def screenshot(browser, url: str, png: Path) -> PanelCheck:
@@ -180,8 +195,7 @@ def main(argv=None) -> int:
                     try:
                         check = screenshot(browser, url, png)
                     finally:
-                        proc.terminate()
-                        proc.wait(10)
+                        stop(proc)
             except RuntimeError as err:
                 print(f"{name}: FAILED: {err}")
                 failed += 1
