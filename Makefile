@@ -1,12 +1,14 @@
 # Two commands do all their own set-up on a fresh clone:
 #   make demo   creates .venv, installs the package, runs the main demo, writes an .rrd
 #   make test   creates .venv, installs the package with its test extras, runs pytest on ti.cpu
+# make view-check (not part of make test) runs every demo and screenshots its recording in Rerun's web viewer in
+# headless Chromium (installs Debian's chromium if it is missing); the screenshots go to docs/
 PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
 OUT ?= out
 
-.PHONY: demo test bench clean
+.PHONY: demo test bench view-check clean
 
 $(VENV)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -24,6 +26,15 @@ test: $(VENV)/.installed
 
 bench: $(VENV)/.installed
 	$(PY) -m taichi_cloth bench --out $(OUT)/bench
+
+$(VENV)/.view: $(VENV)/.installed
+	$(PY) -m pip install --quiet -e '.[view]'
+	touch $@
+
+view-check: $(VENV)/.view
+	command -v chromium >/dev/null 2>&1 || { $$(test "$$(id -u)" = 0 || echo sudo) apt-get update -qq && \
+		$$(test "$$(id -u)" = 0 || echo sudo) apt-get install -y -qq chromium; }
+	$(PY) -m taichi_cloth.view_check --out $(OUT)/view --shots docs
 
 clean:
 	rm -rf $(VENV) $(OUT) .pytest_cache *.egg-info

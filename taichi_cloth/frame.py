@@ -19,12 +19,17 @@ class SceneLayout:
     series:           scalar series path (under the cloth's metrics) -> series names: energy, level, seam gap...
     colliders:        one description dict per collider (collision objects' describe(), plus "moving": the body
                       moves during the run and its vertices arrive in the snapshots' `meshes`)
+    strain_scale:     the strain [-] the vertex colours show as full red (taichi_cloth.strain.strain_colormap), or
+                      None when the colours are not a strain map
+    garment:          the cloth is a garment sewn from pattern pieces (its recording has a pattern view)
     """
 
     name: str
     topology_changes: bool
     series: dict = field(default_factory=dict)
     colliders: list = field(default_factory=list)
+    strain_scale: float | None = None
+    garment: bool = False
 
 
 @dataclass
@@ -41,6 +46,10 @@ class FrameSnapshot:
     points:           name -> (N,3) float32 extra points [m] that move (e.g. "pins" moving along a path)
     fixed_points:     name -> (N,3) float32 points [m] that stay where they are while the topology does (fixed
                       pins): logged with the triangles
+    pieces:           name -> (P_k,) int particle indices: the cloth's parts shown as entities of their own (a
+                      garment's pattern pieces until the seams merge), logged with the triangles; empty: one mesh
+    segments:         name -> (S,2,3) float32 line segments [m] that move (e.g. a seam's open pairs while sewing);
+                      a name logged before and missing now is cleared
     meshes:           collider index -> (V,3) float32 new vertex positions [m] of a body that moved
     scalars:          series path -> a value or a list of values (e.g. "energy" -> [kinetic, potential, total] [J])
     events:           (level, text) pairs: what happened since the last snapshot ("INFO", "WARN", "ERROR")
@@ -55,6 +64,8 @@ class FrameSnapshot:
     colors: np.ndarray | None = None
     points: dict = field(default_factory=dict)
     fixed_points: dict = field(default_factory=dict)
+    pieces: dict = field(default_factory=dict)
+    segments: dict = field(default_factory=dict)
     meshes: dict = field(default_factory=dict)
     scalars: dict = field(default_factory=dict)
     events: list = field(default_factory=list)

@@ -8,20 +8,43 @@ colours (Rerun's partial-update pattern), the scalars and the events. The per-fr
 in memory and sent as columns every BATCH_FRAMES frames (one Rerun call for many frames: a frame logged by itself
 cost 0.2-0.75 ms on the demos, 0.13-0.64 ms batched); flush() and close() send what is kept, so a run that fails
 midway loses nothing. Timelines: "frame" (sequence) and "sim_time" (duration, s). Scalars live under
-metrics/<entity>/...: energy (kinetic, potential, total [J]), strain/max, level, seam_gap [mm], perf/steps_per_s.
+metrics/<entity>/...: energy (kinetic, potential, total [J]), strain/max, speed/max [m/s], level, seam_gap [mm],
+perf/steps_per_s.
+
+What a user opens: the world is right-handed with Y up (logged once at "/"), and every recording of a cloth carries
+a default blueprint (the viewer's layout): the 3D view large, looking at the cloth from the front (+z) at a distance
+that frames it, the pattern's 2D view (origin /pattern) as a tab for garments, the strain colours' legend under it,
+and the plots grouped beside it (energy, strain, seam gap, speed, level, events). A garment's pattern pieces are
+entities of their own (<entity>/pieces/<piece>) until its seams merge, then one mesh (<entity>/mesh); the seams
+show as lines (<entity>/seams/<seam>) while they close; a body mesh is <entity>/body.
 Open a recording with `rerun FILE.rrd`.
 """
 from __future__ import annotations
 
 from pathlib import Path
 
+from dataclasses import dataclass
+
 import numpy as np
 import rerun as rr
+import rerun.blueprint as rrb
 
 from .paths import free_path
-from .strain import strain_colors
+from .strain import strain_colormap, strain_colors
+
+#: the engine's world: right-handed, Y up (+z is the body's front)
+WORLD = rr.ViewCoordinates.RIGHT_HAND_Y_UP
+#: the entity of the strain colours' legend (a colour bar image)
+LEGEND = "legend/strain"
+#: the plots of the default blueprint: (the first part of a series path under metrics/<entity>/, the view's name)
+PLOTS = (("energy", "energy [J]"), ("strain", "max strain [-]"), ("seam_gap", "seam gap [mm]"),
+         ("speed", "max speed [m/s]"), ("level", "level"))
+#: the viewer's vertical field of view [deg] and the 3D view's width / height in the default blueprint
+CAMERA_FOV_Y, VIEW_ASPECT = 55.0, 1.1
 
 CLOTH_COLOR = (200, 90, 60, 255)
+WHITE = (255, 255, 255, 255)  # the albedo of a mesh with vertex colours (the albedo multiplies them)
+SEAM_COLOR = (40, 110, 220, 255)
 PIN_COLOR = (30, 30, 30, 255)
 BODY_COLOR = (170, 170, 180, 255)
 FLOOR_COLOR = (120, 140, 120, 255)
@@ -39,6 +62,45 @@ class _Batch:
         self.normals: list[np.ndarray] = []
         self.colors: list[np.ndarray] = []
         self.scalars: dict[str, tuple[list, list, list]] = {}  # path -> (frames, times, values)
+
+
+@dataclass
+class _Shown:
+    """What the blueprint shows of one cloth entity: its SceneLayout, and its box [m] at its last frame logged (the
+    translation applied), (3,) lo and hi, None before."""
+
+    layout: object
+    translation: np.ndarray
+    lo: np.ndarray | None = None
+    hi: np.ndarray | None = None
+
+
+def _path(*parts: str) -> str:
+    """An entity path from plain names (a seam named "left side" keeps its space): each `/`-separated part escaped."""
+    return "/".join(rr.escape_entity_path_part(p) for part in parts for p in part.split("/") if p)
+
+
+def _collider_names(colliders: list) -> list[str]:
+    """The entity name of each collider description: a mesh is the body, primitives are colliders (numbered from
+    the second of a kind)."""
+    names, seen = [], {}
+    for d in colliders:
+        base = "body" if d["kind"] == "mesh" else "colliders"
+        seen[base] = seen.get(base, 0) + 1
+        names.append(base if seen[base] == 1 else f"{base}_{seen[base]}")
+    return names
+
+
+def _vertex_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """(V,3) float32 area-weighted unit vertex normals of a (V,3) [m], (T,3) mesh: without them the viewer draws a
+    mesh unlit, a flat silhouette."""
+    v = np.asarray(vertices, np.float64)
+    a, b, c = (v[triangles[:, k]] for k in range(3))
+    face = np.cross(b - a, c - a)
+    n = np.zeros_like(v)
+    for k in range(3):
+        np.add.at(n, triangles[:, k], face)
+    return (n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-20)).astype(np.float32)
 
 
 def _quaternion_z_to(direction) -> list:
@@ -66,10 +128,16 @@ class Recorder:
         self._versions: dict[str, int] = {}  # entity -> the topology version it logged last
         self._static_topology: dict[str, bool] = {}  # entity -> its triangles never change
         self._batches: dict[str, _Batch] = {}  # entity -> the frames kept for one send
+        self._parts: dict[str, list] = {}  # entity -> (mesh entity path, (P_k,) particles or None: all) per part
+        self._segments: dict[str, set] = {}  # entity -> the segment entity paths logged last
+        self._colliders: dict[str, list] = {}  # entity -> the entity path of each collider
+        self._shown: dict[str, _Shown] = {}  # entity -> what the blueprint frames and plots
+        self._framed = None  # the box [m] (lo, hi) the blueprint sent last frames
         self.stream = rr.RecordingStream(application_id)
         self.stream.save(str(self.path))
         if recording_name:
             self.stream.send_recording_name(recording_name)
+        self.stream.log("/", WORLD, static=True)
         self.frames_logged = 0
 
     # ------------------------------------------------------------------ cloth
@@ -83,8 +151,14 @@ class Recorder:
             rec.log(f"metrics/{entity}/{path}", rr.SeriesLines(names=names), static=True)
         self._static_topology[entity] = not layout.topology_changes
         self._versions.pop(entity, None)
-        for k, description in enumerate(layout.colliders):
-            self.log_collider(f"{entity}/colliders/{k}", description, static=not description.get("moving", False))
+        self._colliders[entity] = [f"{entity}/{name}" for name in _collider_names(layout.colliders)]
+        for path, description in zip(self._colliders[entity], layout.colliders):
+            self.log_collider(path, description, static=not description.get("moving", False))
+        if layout.strain_scale is not None:
+            self.stream.log(LEGEND, rr.EncodedImage(contents=strain_colormap(layout.strain_scale).legend_png(),
+                                                    media_type="image/png"), static=True)
+        offset = np.zeros(3) if translation is None else np.asarray(translation, np.float64)
+        self._shown[entity] = _Shown(layout, offset)
 
     def log_collider(self, entity: str, description: dict, static: bool = True) -> None:
         """A collider, once, as static data: a body mesh, spheres, capsules and planes (a 4 m square). A body that
@@ -93,9 +167,9 @@ class Recorder:
         if description["kind"] == "self":
             return
         if description["kind"] == "mesh":
-            rec.log(entity, rr.Mesh3D(vertex_positions=np.asarray(description["vertices"], np.float32),
-                                      triangle_indices=np.asarray(description["triangles"], np.uint32),
-                                      albedo_factor=BODY_COLOR), static=static)
+            v, tri = np.asarray(description["vertices"], np.float32), np.asarray(description["triangles"], np.int64)
+            rec.log(entity, rr.Mesh3D(vertex_positions=v, triangle_indices=tri.astype(np.uint32),
+                                      vertex_normals=_vertex_normals(v, tri), albedo_factor=BODY_COLOR), static=static)
             return
         if description["spheres"]:
             rec.log(f"{entity}/spheres", rr.Ellipsoids3D(
@@ -129,8 +203,7 @@ class Recorder:
         if self._versions.get(entity) != frame.topology_version:
             static = self._static_topology.get(entity, True)
             if triangles:
-                rec.log(f"{entity}/mesh", rr.Mesh3D.from_fields(
-                    triangle_indices=np.asarray(frame.triangles, np.uint32), albedo_factor=CLOTH_COLOR), static=static)
+                self._log_topology(entity, frame, static)
             for name, points in frame.fixed_points.items():
                 rec.log(f"{entity}/{name}", rr.Points3D(np.asarray(points, np.float32), radii=0.01, colors=PIN_COLOR),
                         static=static)
@@ -148,17 +221,105 @@ class Recorder:
             rec.log(f"{entity}/particles", rr.Points3D(frame.positions, radii=0.005, colors=CLOTH_COLOR))
         for name, points in frame.points.items():
             rec.log(f"{entity}/{name}", rr.Points3D(np.asarray(points, np.float32), radii=0.01, colors=PIN_COLOR))
+        self._log_segments(entity, frame.segments)
         for k, vertices in frame.meshes.items():
-            rec.log(f"{entity}/colliders/{k}", rr.Mesh3D.from_fields(vertex_positions=vertices))
+            rec.log(self._colliders[entity][k], rr.Mesh3D.from_fields(vertex_positions=vertices))
         for path, value in frame.scalars.items():
             frames, times, values = batch.scalars.setdefault(path, ([], [], []))
             frames.append(frame.frame)
             times.append(frame.t)
             values.append(np.atleast_1d(np.asarray(value, np.float64)))
         self.log_events(entity, frame.frame, frame.t, frame.events)
+        shown = self._shown.get(entity)
+        if shown is not None and len(frame.positions):
+            first = shown.lo is None
+            x = np.asarray(frame.positions)
+            shown.lo, shown.hi = x.min(axis=0) + shown.translation, x.max(axis=0) + shown.translation
+            if first:  # a layout from the start (kept if the run dies), framed anew at close() on the last frame
+                self._send_blueprint()
         self.frames_logged += 1
         if len(batch.frames) >= BATCH_FRAMES or any(len(f) >= BATCH_FRAMES for f, _, _ in batch.scalars.values()):
             self._send(entity)
+
+    def _log_topology(self, entity: str, frame, static: bool) -> None:
+        """The triangles of each part of the cloth (frame.pieces, or the whole mesh), white-lit when the vertices
+        carry colours; parts of the topology before that are gone are cleared."""
+        rec = self.stream
+        tri = np.asarray(frame.triangles, np.int64)
+        parts = [(f"{entity}/pieces/{_path(name)}", np.asarray(idx, np.int64)) for name, idx in frame.pieces.items()]
+        parts = parts or [(f"{entity}/mesh", None)]
+        for path in sorted({path for path, _ in self._parts.get(entity, [])} - {path for path, _ in parts}):
+            rec.log(path, rr.Clear(recursive=False))  # e.g. the pieces at the seam merge
+        albedo = CLOTH_COLOR if frame.colors is None else WHITE
+        for path, idx in parts:
+            local = tri
+            if idx is not None:
+                index = np.full(len(frame.positions), -1, np.int64)
+                index[idx] = np.arange(len(idx))
+                local = index[tri]
+                local = local[(local >= 0).all(axis=1)]
+            rec.log(path, rr.Mesh3D.from_fields(triangle_indices=local.astype(np.uint32), albedo_factor=albedo),
+                    static=static)
+        self._parts[entity] = parts
+
+    def _log_segments(self, entity: str, segments: dict) -> None:
+        """Line segments (S,2,3) [m] by name; a name logged before and missing now is cleared."""
+        now = set()
+        for name, seg in segments.items():
+            path = f"{entity}/{_path(name)}"
+            self.stream.log(path, rr.LineStrips3D(np.asarray(seg, np.float32), radii=0.0015, colors=SEAM_COLOR))
+            now.add(path)
+        for path in sorted(self._segments.get(entity, set()) - now):
+            self.stream.log(path, rr.Clear(recursive=False))
+        self._segments[entity] = now
+
+    def _send_blueprint(self) -> None:
+        """Send the default layout when the box it frames changed since it was sent last."""
+        framed = [s for s in self._shown.values() if s.lo is not None]
+        if not framed:
+            return
+        box = (np.min([s.lo for s in framed], axis=0), np.max([s.hi for s in framed], axis=0))
+        if self._framed is None or not all(np.allclose(a, b, atol=1e-3) for a, b in zip(box, self._framed)):
+            self.stream.send_blueprint(self._blueprint(*box))
+            self._framed = box
+
+    def _blueprint(self, lo: np.ndarray, hi: np.ndarray) -> rrb.Blueprint:
+        """The default layout: the 3D view (a camera in front (+z) framing the box lo..hi [m] of every cloth's
+        last frame: the viewer opens a recording at its end) with the pattern as a tab for garments and the strain
+        legend below, the grouped plots and the events beside it."""
+        shown = self._shown
+        center, size = 0.5 * (lo + hi), np.maximum(hi - lo, 0.05)
+        # the distance at which the box's front face fills the view (with a margin), from the front (+z)
+        half = 0.5 * max(size[1], size[0] / VIEW_ASPECT) * 1.25
+        distance = half / np.tan(np.radians(CAMERA_FOV_Y) / 2) + 0.5 * size[2]
+        eye = rrb.EyeControls3D(position=(center + [0.0, 0.1 * size[1], distance]).tolist(),
+                                look_target=center.tolist(), eye_up=[0.0, 1.0, 0.0])
+        scene = rrb.Spatial3DView(name="scene", origin="/", eye_controls=eye,
+                                  background=rrb.BackgroundKind.GradientDark,  # the white of no strain stands out
+                                  contents=["+ /**", "- /metrics/**", f"- /{LEGEND}/**", "- /pattern/**"])
+        if any(s.layout.garment for s in shown.values()):
+            scene = rrb.Tabs(scene, rrb.Spatial2DView(name="pattern", origin="/pattern"), active_tab=0)
+        left, shares = [scene], [1.0]
+        if any(s.layout.strain_scale is not None for s in shown.values()):
+            left.append(rrb.Spatial2DView(name="strain colours", origin=f"/{LEGEND}"))
+            shares = [7.0, 1.0]
+        plots = []
+        for group, name in PLOTS:
+            contents = [f"/metrics/{e}/{group}/**" for e, s in shown.items()
+                        if any(path.split("/")[0] == group for path in s.layout.series)]
+            if contents:
+                plots.append(rrb.TimeSeriesView(name=name, origin="/metrics", contents=contents,
+                                                plot_legend=rrb.Corner2D.RightTop))
+        events = rrb.TextLogView(name="events", origin="/", contents=[f"/{e}/events" for e in shown])
+        speed = [f"/metrics/{e}/perf/**" for e, s in shown.items() if "perf/steps_per_s" in s.layout.series]
+        if speed:
+            events = rrb.Tabs(events, rrb.TimeSeriesView(name="steps per second", origin="/metrics", contents=speed,
+                                                         plot_legend=rrb.Corner2D.RightTop))
+        plots.append(events)
+        return rrb.Blueprint(
+            rrb.Horizontal(rrb.Vertical(*left, row_shares=shares), rrb.Vertical(*plots), column_shares=[3, 2]),
+            rrb.BlueprintPanel(state="collapsed"), rrb.SelectionPanel(state="collapsed"),
+            rrb.TimePanel(state="collapsed"))
 
     def _send(self, entity: str) -> None:
         """Send the kept frames of `entity` as columns (one call for the mesh, one per scalar series)."""
@@ -177,10 +338,11 @@ class Recorder:
                 fields["vertex_normals"] = batch.normals
             if len(batch.colors) == k:
                 fields["vertex_colors"] = batch.colors
-            lengths = [len(p) for p in batch.positions]
-            columns = rr.Mesh3D.columns(**{name: np.concatenate(arrays) for name, arrays in fields.items()})
-            rec.send_columns(f"{entity}/mesh", indexes=index(batch.frames, batch.times),
-                             columns=columns.partition(lengths))
+            for path, idx in self._parts.get(entity, [(f"{entity}/mesh", None)]):
+                part = {name: [a if idx is None else a[idx] for a in arrays] for name, arrays in fields.items()}
+                lengths = [len(p) for p in part["vertex_positions"]]
+                columns = rr.Mesh3D.columns(**{name: np.concatenate(arrays) for name, arrays in part.items()})
+                rec.send_columns(path, indexes=index(batch.frames, batch.times), columns=columns.partition(lengths))
         for path, (frames, times, values) in batch.scalars.items():
             column = rr.Scalars.columns(scalars=np.concatenate(values)).partition([len(v) for v in values])
             rec.send_columns(f"metrics/{entity}/{path}", indexes=index(frames, times), columns=column)
@@ -269,7 +431,9 @@ class Recorder:
         self.stream.flush()
 
     def close(self) -> None:
-        """Flush and finish the file (writes the footer); the recorder cannot be used afterwards."""
+        """Frame the 3D view on where the cloths went, flush and finish the file (writes the footer); the recorder
+        cannot be used afterwards."""
+        self._send_blueprint()
         self.flush()
         self.stream.disconnect()
 

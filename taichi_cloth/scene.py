@@ -258,7 +258,8 @@ class Scene:
     def layout(self) -> SceneLayout:
         """What a recording shows for the whole run: the series, the colliders, whether the topology changes."""
         layout = SceneLayout(self.name, any(c.changes_topology for c in self.controllers),
-                             {"energy": ["kinetic", "potential", "total"]})
+                             {"energy": ["kinetic", "potential", "total"], "strain/max": "max strain",
+                              "speed/max": "max speed [m/s]", "perf/steps_per_s": "steps/s"})
         for c in self.controllers:
             c.layout(layout)
         return layout
@@ -271,6 +272,7 @@ class Scene:
         snap = FrameSnapshot(frame, self.state.t, x, normals, tri, self.topology_version, events=list(events))
         snap.scalars["energy"] = [m.kinetic, m.potential, m.total]
         snap.scalars["strain/max"] = m.max_strain
+        snap.scalars["speed/max"] = m.max_speed
         if steps_per_s is not None:
             snap.scalars["perf/steps_per_s"] = steps_per_s
         for record in self._record:

@@ -215,6 +215,7 @@ class Sewing(Controller):
     # ------------------------------------------------------------------ what a recording shows
     def layout(self, layout) -> None:
         layout.series["seam_gap"] = ["max [mm]", "mean [mm]"]
+        layout.garment = True
 
     @property
     def busy(self) -> str | None:
@@ -223,6 +224,14 @@ class Sewing(Controller):
     def record(self, frame) -> None:
         gaps = self.gaps(frame.positions.astype(np.float64))
         frame.scalars["seam_gap"] = [1e3 * gaps.max(), 1e3 * gaps.mean()] if len(gaps) else [0.0, 0.0]
+        g = self.garment
+        if not (self.joined and self.options.join == "merge"):  # the pieces are apart: each its own entity
+            frame.pieces = {name: np.arange(g.offsets[k], g.offsets[k + 1]) for k, name in enumerate(g.piece_names)}
+        if self.active:  # the seams as lines between their pairs, while they close
+            pairs = self.current_of[g.seam_pairs]
+            for s, seam in enumerate(g.spec.seams):
+                p = pairs[g.seam_of_pair == s]
+                frame.segments[f"seams/{seam.name}"] = np.stack([frame.positions[p[:, 0]], frame.positions[p[:, 1]]], 1)
 
 
 def merge_seams(data: ClothData, garment, x: np.ndarray, v: np.ndarray):
