@@ -3,7 +3,7 @@ triangles may change (a seam merge, a 4-8 level switch).
 
 Each step the triangles are binned by their boxes swept from the start to the end of the step (the cloth moves,
 so the grid is hashed and rebuilt every step), and every particle and every edge gathers the triangles near its own
-swept box once. Then a few Jacobi passes, each over the gathered pairs:
+swept box once. Then up to `passes` Jacobi passes over the gathered pairs (until one finds no contact):
   point-triangle: particle p and a triangle not incident to it, p's closest point c on the triangle within half a
     thickness of the triangle's outline in its plane, and d0, d1 = p's height above the triangle's plane at the
     start and the end of the step. The side is d0's (the layers' order before the step); a pair closer than the
@@ -76,6 +76,7 @@ class SelfCollision(ParticleCollider):
         self.counters = blk.scalar(ti.i64, 5)
         self.tau = blk.scalar(ti.f32, ())
         self.n_edges = blk.scalar(ti.i32, ())
+        self.pass_contacts = blk.scalar(ti.i32, ())
         blk.finalize(self)
         self.tau[None] = self.thickness
 
@@ -88,11 +89,12 @@ class SelfCollision(ParticleCollider):
         blk = FieldBlock()
         self.cand = blk.scalar(ti.i32, (P, K))  # triangles near each particle
         self.n_cand = blk.scalar(ti.i32, P)
-        self.edge_cand = blk.scalar(ti.i32, (E, K))  # triangles near each edge
+        self.edge_cand = blk.scalar(ti.i32, (E, K))  # edges near each edge (with a higher id)
         self.n_edge_cand = blk.scalar(ti.i32, E)
         self.edges = blk.vector(2, ti.i32, E)
         self.triangle_edges = blk.vector(3, ti.i32, T)
-        self.first_triangle = blk.scalar(ti.i32, E)  # an edge is taken from this one of its triangles only
+        self.box_lo = blk.vector(3, ti.f32, T)  # the triangles' padded swept boxes [m] of this step
+        self.box_hi = blk.vector(3, ti.f32, T)
         self.on_seam = blk.scalar(ti.i8, P)
         self.dx = blk.vector(3, self.x.dtype, P)
         self.dv = blk.vector(3, self.x.dtype, P)
@@ -114,11 +116,8 @@ class SelfCollision(ParticleCollider):
         if len(edges) > self.edge_capacity:
             raise ValueError(f"self-collision: the cloth has {len(edges)} edges, capacity {self.edge_capacity} "
                              "(give every mesh the cloth can take in `shapes`)")
-        first = np.full(len(edges), len(t), dtype=np.int64)  # the smallest triangle id around each edge
-        np.minimum.at(first, face_edge.ravel(), np.repeat(np.arange(len(t)), 3))
         fill_prefix(self.edges, edges.astype(np.int32))
         fill_prefix(self.triangle_edges, face_edge.astype(np.int32))
-        fill_prefix(self.first_triangle, first.astype(np.int32))
         self.n_edges[None] = len(edges)
         flags = np.zeros(self.x.shape[0], dtype=np.int8)
         if len(positions) == len(self.shapes[0][0]) and len(self.seam_particles):
@@ -130,7 +129,9 @@ class SelfCollision(ParticleCollider):
     def resolve(self, dt: float) -> None:
         self.grid.build()
         self._gather()
-        self._passes()
+        for _ in range(self.passes):
+            if self._pass() == 0:  # nothing touched: the later passes would find nothing either
+                break
 
     def counter_values(self) -> dict:
         names = ("candidates", "edge candidates", "point-triangle contacts", "edge-edge contacts",
@@ -139,9 +140,26 @@ class SelfCollision(ParticleCollider):
 
     # ------------------------------------------------------------------ candidates
     @ti.func
-    def _collect(self, lo, hi, row, cand: ti.template(), skip_vertex):
-        """Gather into cand[row, :] the triangles whose padded swept boxes meet box [lo, hi] (not those with vertex
-        `skip_vertex`); returns how many."""
+    def _add(self, cand: ti.template(), row, n, item):
+        """Append `item` to cand[row, :n] unless it is there; returns the new count (overflows are counted)."""
+        seen = False
+        for k in range(n):
+            if cand[row, k] == item:
+                seen = True
+                break
+        out = n
+        if not seen:
+            if n < self.max_candidates:
+                cand[row, n] = item
+                out = n + 1
+            else:
+                ti.atomic_add(self.counters[4], 1)
+        return out
+
+    @ti.func
+    def _collect(self, lo, hi, row, cand: ti.template(), skip_a, skip_b, edges: ti.template()):
+        """Gather into cand[row, :] the triangles whose padded swept boxes meet box [lo, hi] and have neither vertex
+        skip_a nor skip_b, or with `edges`, the edges above `row` of those triangles; returns how many."""
         cmin, cmax = self.grid.clamp_range(lo, hi)
         n = 0
         for a, b, c in ti.ndrange((cmin[0], cmax[0] + 1), (cmin[1], cmax[1] + 1), (cmin[2], cmax[2] + 1)):
@@ -149,37 +167,37 @@ class SelfCollision(ParticleCollider):
             for e in range(self.grid.cell_start[cell], self.grid.cell_start[cell + 1]):
                 t = self.grid.cell_triangles[e]
                 tri = self.triangles[t]
-                t_lo, t_hi = self.grid.triangle_box(t)  # hash collisions and cell corners bring far ones
-                if (tri[0] != skip_vertex and tri[1] != skip_vertex and tri[2] != skip_vertex
-                        and all(t_lo <= hi) and all(lo <= t_hi)):
-                    seen = False
-                    for k in range(n):
-                        if cand[row, k] == t:
-                            seen = True
-                            break
-                    if not seen:
-                        if n < self.max_candidates:
-                            cand[row, n] = t
-                            n += 1
-                        else:
-                            ti.atomic_add(self.counters[4], 1)
+                # hash collisions and cell corners bring far ones
+                if (all(self.box_lo[t] <= hi) and all(lo <= self.box_hi[t]) and tri[0] != skip_a
+                        and tri[1] != skip_a and tri[2] != skip_a and tri[0] != skip_b and tri[1] != skip_b
+                        and tri[2] != skip_b):
+                    if ti.static(edges):
+                        for j in ti.static(range(3)):
+                            f = self.triangle_edges[t][j]
+                            if f > row:  # each pair once
+                                n = self._add(cand, row, n, f)
+                    else:
+                        n = self._add(cand, row, n, t)
         return n
 
     @ti.kernel
     def _gather(self):
+        # in parallel even on a small cloth: a few milliseconds of work, against a dispatch of ~0.1 ms
         tau = ti.cast(self.tau[None], ti.f32)
-        ti.loop_config(serialize=self.serial)
+        for t in range(self.n_triangles[None]):
+            self.box_lo[t], self.box_hi[t] = self.grid.triangle_box(t)
         for i in range(self.n_particles[None]):
             p0, p1 = ti.cast(self.x_start[i], ti.f32), ti.cast(self.x[i], ti.f32)
-            n = self._collect(ti.min(p0, p1) - tau, ti.max(p0, p1) + tau, i, self.cand, i)
+            n = self._collect(ti.min(p0, p1) - tau, ti.max(p0, p1) + tau, i, self.cand, i, i, False)
             self.n_cand[i] = n
             ti.atomic_add(self.counters[0], n)
-        ti.loop_config(serialize=self.serial)
         for e in range(self.n_edges[None]):
+            # edges within one ring of the edge's ends are its neighbours, not its contacts
             ab = self.edges[e]
             lo = ti.min(self.x_start[ab[0]], self.x_start[ab[1]], self.x[ab[0]], self.x[ab[1]])
             hi = ti.max(self.x_start[ab[0]], self.x_start[ab[1]], self.x[ab[0]], self.x[ab[1]])
-            n = self._collect(ti.cast(lo, ti.f32) - tau, ti.cast(hi, ti.f32) + tau, e, self.edge_cand, -1)
+            n = self._collect(ti.cast(lo, ti.f32) - tau, ti.cast(hi, ti.f32) + tau, e, self.edge_cand, ab[0], ab[1],
+                              True)
             self.n_edge_cand[e] = n
             ti.atomic_add(self.counters[1], n)
 
@@ -253,6 +271,7 @@ class SelfCollision(ParticleCollider):
                 w = ti.Vector([1.0, -bary[0], -bary[1], -bary[2]], self.x.dtype)
                 self._push(ids, w, side * n1, tau - side * d1, friction)
                 ti.atomic_add(self.counters[2], 1)
+                ti.atomic_add(self.pass_contacts[None], 1)
 
     @ti.func
     def _edge_edge(self, e, f, tau, friction):
@@ -274,43 +293,42 @@ class SelfCollision(ParticleCollider):
                     w = ti.Vector([1 - u, u, -(1 - s), -s], self.x.dtype)
                     self._push(ids, w, n, tau - gap, friction)
                     ti.atomic_add(self.counters[3], 1)
+                    ti.atomic_add(self.pass_contacts[None], 1)
 
     @ti.kernel
-    def _passes(self):
+    def _pass(self) -> ti.i32:
+        """One Jacobi pass over the gathered pairs; returns how many contacts it found."""
         tau = ti.cast(self.tau[None], self.x.dtype)
         friction = ti.cast(self.friction, self.x.dtype)
-        for _ in ti.static(range(self.passes)):
-            ti.loop_config(serialize=self.serial)
-            for i in range(self.n_particles[None]):
-                self.dx[i] = ti.Vector.zero(self.x.dtype, 3)
-                self.dv[i] = ti.Vector.zero(self.x.dtype, 3)
-                self.hits[i] = 0
-            ti.loop_config(serialize=self.serial)
-            for i in range(self.n_particles[None]):
-                for k in range(self.n_cand[i]):
-                    t = self.cand[i, k]
-                    tri = self.triangles[t]
-                    seams = self.on_seam[tri[0]] + self.on_seam[tri[1]] + self.on_seam[tri[2]]
-                    if not self._seams_meet(self.on_seam[i], seams):
-                        self._point_triangle(i, t, tau, friction)
-            ti.loop_config(serialize=self.serial)
-            for e in range(self.n_edges[None]):
-                ab = self.edges[e]
-                for k in range(self.n_edge_cand[e]):
-                    t = self.edge_cand[e, k]
-                    for j in ti.static(range(3)):
-                        f = self.triangle_edges[t][j]
-                        cd = self.edges[f]
-                        if (f > e and self.first_triangle[f] == t and cd[0] != ab[0] and cd[0] != ab[1]
-                                and cd[1] != ab[0] and cd[1] != ab[1]
-                                and not self._seams_meet(self.on_seam[ab[0]] + self.on_seam[ab[1]],
-                                                         self.on_seam[cd[0]] + self.on_seam[cd[1]])):
-                            self._edge_edge(e, f, tau, friction)
-            ti.loop_config(serialize=self.serial)
-            for i in range(self.n_particles[None]):
-                if self.hits[i] > 0:
-                    self.x[i] += self.dx[i] / self.hits[i]
-                    self.v[i] += self.dv[i] / self.hits[i]
+        self.pass_contacts[None] = 0
+        ti.loop_config(serialize=self.serial)
+        for i in range(self.n_particles[None]):
+            self.dx[i] = ti.Vector.zero(self.x.dtype, 3)
+            self.dv[i] = ti.Vector.zero(self.x.dtype, 3)
+            self.hits[i] = 0
+        ti.loop_config(serialize=self.serial)
+        for i in range(self.n_particles[None]):
+            for k in range(self.n_cand[i]):
+                t = self.cand[i, k]
+                tri = self.triangles[t]
+                seams = self.on_seam[tri[0]] + self.on_seam[tri[1]] + self.on_seam[tri[2]]
+                if not self._seams_meet(self.on_seam[i], seams):
+                    self._point_triangle(i, t, tau, friction)
+        ti.loop_config(serialize=self.serial)
+        for e in range(self.n_edges[None]):
+            ab = self.edges[e]
+            for k in range(self.n_edge_cand[e]):
+                f = self.edge_cand[e, k]
+                cd = self.edges[f]
+                if not self._seams_meet(self.on_seam[ab[0]] + self.on_seam[ab[1]],
+                                        self.on_seam[cd[0]] + self.on_seam[cd[1]]):
+                    self._edge_edge(e, f, tau, friction)
+        ti.loop_config(serialize=self.serial)
+        for i in range(self.n_particles[None]):
+            if self.hits[i] > 0:
+                self.x[i] += self.dx[i] / self.hits[i]
+                self.v[i] += self.dv[i] / self.hits[i]
+        return self.pass_contacts[None]
 
     def describe(self) -> dict:
         return {"kind": "self"}

@@ -380,13 +380,15 @@ def _apply_quality(cfg: dict) -> None:
 
 def load_scene(source: str | Path | dict, *, frames: int | None = None, integrator: str | None = None,
                dt: float | None = None, precision: str | None = None, out: str | Path | None = None,
-               integrator_options: dict | None = None, quality: str | None = None) -> LoadedScene:
+               integrator_options: dict | None = None, quality: str | None = None,
+               base_dir: str | Path | None = None) -> LoadedScene:
     """Parse and build a scene; keyword arguments override the file (as the CLI flags do).
 
     `quality` (preview | balanced | accurate) replaces the file's integrator, options, dt and level by the
     measured preset (taichi_cloth.quality); `integrator` and `dt` then override the preset's choice.
-    Overriding the integrator drops the file's options that the new integrator does not have."""
-    cfg = parse_scene(source)
+    Overriding the integrator drops the file's options that the new integrator does not have. A scene given as a
+    dict reads its relative paths from `base_dir` (default: the current folder)."""
+    cfg = parse_scene(source, Path(base_dir) if base_dir is not None else None)
     v = Validator(cfg["_label"] + " (override)")
     if quality is not None:
         cfg["quality"] = v.value(Field("str", choices=QUALITIES), quality, "--quality")

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .strain import strain_colors, vertex_strain
+from .strain import strain_colormap, vertex_strain
 
 #: body triangles drawn at most (a regular subsample of the mesh's beyond this)
 MAX_BODY_TRIANGLES = 60000
@@ -80,7 +80,8 @@ def render_still(scene, path, title: str | None = None, full_scale: float = 0.1)
     data = scene.model.data
     x = np.asarray(scene.positions(), np.float64)[: data.n_particles]
     strain = vertex_strain(data, x)
-    cloth_rgb = strain_colors(strain, full_scale)[:, :3] / 255.0
+    colormap = strain_colormap(full_scale)  # the recording's legend and vertex colours use the same map
+    cloth_rgb = colormap.colors(strain)[:, :3] / 255.0
     tris = np.asarray(data.triangles, np.int64)
     edge = float(np.median(np.linalg.norm(x[tris[:, 1]] - x[tris[:, 0]], axis=1))) if len(tris) else 0.0
     parts = [(x[tris], cloth_rgb[tris].mean(axis=1), False, edge)]
@@ -106,9 +107,12 @@ def render_still(scene, path, title: str | None = None, full_scale: float = 0.1)
         ax.set_axis_off()
         ax.set_title(name)
     peak = float(strain.max()) if len(strain) else 0.0
-    fig.suptitle(title or f"{scene.name}: t = {scene.state.t:.2f} s, max strain {100 * peak:.1f} % "
-                          f"(white 0, yellow, red {100 * full_scale:.0f} % and above)", fontsize=10)
-    fig.tight_layout()
+    fig.suptitle(title or f"{scene.name}: t = {scene.state.t:.2f} s, max strain {100 * peak:.1f} %", fontsize=10)
+    fig.tight_layout(rect=(0.0, 0.12, 1.0, 1.0))
+    bar = fig.add_axes((0.3, 0.09, 0.4, 0.025))
+    low, high = colormap.range_percent
+    fig.colorbar(matplotlib.cm.ScalarMappable(matplotlib.colors.Normalize(low, high), colormap.matplotlib()),
+                 cax=bar, orientation="horizontal", label="strain [%] (the top colour: that and above)")
     fig.savefig(path)
     plt.close(fig)
     return path
