@@ -31,22 +31,10 @@ def segment_triangle(p, q, a, b, c):
 
 @ti.func
 def inside_triangle(x, a, b, c, n):
-    """Is the projection of x along unit normal n inside triangle (a, b, c) (with the edge slack)?"""
-    e1 = b - a
-    e2 = c - a
-    w = x - a
-    d00 = e1.dot(e1)
-    d01 = e1.dot(e2)
-    d11 = e2.dot(e2)
-    d20 = w.dot(e1)
-    d21 = w.dot(e2)
-    den = d00 * d11 - d01 * d01
-    inside = False
-    if den > 0:
-        v = (d11 * d20 - d01 * d21) / den
-        u2 = (d00 * d21 - d01 * d20) / den
-        inside = v >= -EDGE_SLACK and u2 >= -EDGE_SLACK and v + u2 <= 1.0 + EDGE_SLACK
-    return inside
+    """Is the projection of x along unit normal n inside triangle (a, b, c) (with the edge slack)? A degenerate
+    triangle has nothing inside."""
+    w = barycentric(x, a, b, c)  # zeros for a degenerate triangle, else summing to 1
+    return w.sum() > 0.5 and w.min() >= -EDGE_SLACK
 
 
 @ti.func

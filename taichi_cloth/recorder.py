@@ -16,7 +16,7 @@ a default blueprint (the viewer's layout): the 3D view large, looking at the clo
 that frames it, the pattern's 2D view (origin /pattern) as a tab for garments, the strain colours' legend under it,
 and the plots grouped beside it (energy, strain, seam gap, speed, level, events). A garment's pattern pieces are
 entities of their own (<entity>/pieces/<piece>) until its seams merge, then one mesh (<entity>/mesh); the seams
-show as lines (<entity>/seams/<seam>) while they close; a body mesh is <entity>/body.
+show as lines (<entity>/seams, every open pair) while they close; a body mesh is <entity>/body.
 Open a recording with `rerun FILE.rrd`.
 """
 from __future__ import annotations

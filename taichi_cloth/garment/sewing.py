@@ -227,11 +227,9 @@ class Sewing(Controller):
         g = self.garment
         if not (self.joined and self.options.join == "merge"):  # the pieces are apart: each its own entity
             frame.pieces = {name: np.arange(g.offsets[k], g.offsets[k + 1]) for k, name in enumerate(g.piece_names)}
-        if self.active:  # the seams as lines between their pairs, while they close
-            pairs = self.current_of[g.seam_pairs]
-            for s, seam in enumerate(g.spec.seams):
-                p = pairs[g.seam_of_pair == s]
-                frame.segments[f"seams/{seam.name}"] = np.stack([frame.positions[p[:, 0]], frame.positions[p[:, 1]]], 1)
+        if self.active:  # the seams as lines between their pairs, while they close: one entity, one call a frame
+            p = self.current_of[g.seam_pairs]
+            frame.segments["seams"] = np.stack([frame.positions[p[:, 0]], frame.positions[p[:, 1]]], 1)
 
 
 def merge_seams(data: ClothData, garment, x: np.ndarray, v: np.ndarray):
