@@ -110,7 +110,8 @@ class Colliders(Controller):
     @property
     def stats(self) -> dict:
         """The collision counters of the colliders that keep them (mesh bodies: candidate triangles, crossing
-        tests, crossings, proximity contacts...; self-collision: candidates, corrections), summed by name."""
+        tests, crossings, proximity contacts...; self-collision: candidates, point-triangle and edge-edge
+        contacts), summed by name."""
         out: dict[str, int] = {}
         for c in self.objects:
             if hasattr(c, "counter_values"):
