@@ -90,7 +90,7 @@ def assemble(cloth, *, name: str = "cloth", integrator: str = DEFAULT_INTEGRATOR
     step_guard:         what to do when an explicit integrator's dt exceeds its stable bound: warn | refuse | off
     max_speed [m/s], max_strain [-]: beyond these (or at any NaN) a run is declared blown up
     rest:               when the cloth counts as at rest (RestCriterion keyword arguments: max_speed, p99_speed
-                        [m/s], window [s]) and stop (bool, default False): Scene.run ends the run there
+                        [m/s], hold, window [s]) and stop (bool, default False): Scene.run ends the run there
     base_dir:           the folder relative collider mesh paths are read from
     """
     auto = _check_step_options(dt, adaptive, fps, step_guard)
@@ -168,7 +168,7 @@ def _rest(options: dict | None) -> tuple[RestCriterion, bool]:
         return RestCriterion(**opts), stop
     except TypeError:
         raise SceneError(f"rest has no option {sorted(set(opts) - set(RestCriterion.__dataclass_fields__))[0]!r} "
-                         "(options: stop, max_speed, p99_speed, window, energy_tolerance)") from None
+                         "(options: stop, max_speed, p99_speed, hold, window, energy_tolerance)") from None
     except ValueError as err:
         raise SceneError(str(err)) from None
 

@@ -161,7 +161,8 @@ SCHEMA = Table({
                    "morph": Field("str", "before", choices=("before", "during")),
                    "morph_time": Field("number", 1.0, positive), "tolerance": Field("number", 1e-3, positive)}),
     "rest": Table({"stop": Field("bool", False), "max_speed": Field("number", 5e-3, positive),
-                   "p99_speed": Field("number", 1e-3, positive), "window": Field("number", 1.0, positive)}),
+                   "p99_speed": Field("number", 1e-3, positive), "window": Field("number", 1.0, positive),
+                   "hold": Field("number", 0.5, positive)}),
     "output": Table({"dir": Field("str", "out"), "record": Field("bool", True), "mesh": Field("bool", True),
                      "record_every": Field("int", 1, at_least(1))}, always=True),
 })

@@ -48,6 +48,16 @@ def test_the_criterion_needs_slow_particles_a_covered_window_no_energy_rise_and_
     assert status.at_rest
     mon.reset()
     assert mon.status is None and not mon.observe(2.0, frame()).at_rest
+    # a hem swinging to and fro: slow at each turn, fast between; slow frames must have lasted c.hold (0.5 s)
+    swing = RestMonitor(c, energy_scale=1.0)
+    for k, t in enumerate(np.arange(0, 120) / 60):  # 10 slow frames, 10 fast, ..., ending on a fast one
+        status = swing.observe(t, frame(motion=1e-4 if k % 20 < 10 else 4e-3, fast=0.0 if k % 20 < 10 else 0.5))
+        assert not status.at_rest
+    assert "particles above" in status.describe(c)
+    for t in (120 + np.arange(0, 29)) / 60:  # then slow for good
+        status = swing.observe(t, frame())
+    assert not status.at_rest and f"slow for {29 / 60:.3g} s only (of 0.5 s)" in status.describe(c)
+    assert swing.observe(149 / 60, frame()).at_rest  # the 30th slow frame: half a second
 
 
 @pytest.mark.parametrize("bad, words", [({"max_speed": 0.0}, "max_speed must be a positive number"),
