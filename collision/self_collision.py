@@ -49,8 +49,8 @@ class SelfCollision(ParticleCollider):
     seam_particles: (k,) particle ids that sewing pulls together: while the pieces are apart (the first shape's
                     particle count), pairs with seam particles on both sides are skipped
     friction:       Coulomb coefficient between layers; cell_size [m] (default 1.5 x the finest mesh's mean rest
-                    edge); max_candidates: triangles gathered per particle and per edge (more are ignored and
-                    counted); passes: Jacobi passes per step
+                    edge); max_candidates: triangles gathered per particle, edges per edge (more are ignored and
+                    counted); passes: Jacobi passes per step at most
     """
 
     def __init__(self, triangles, n_triangles, shapes, thickness: float | None = None, friction: float = 0.1,
