@@ -67,15 +67,18 @@ class SpringMultigrid:
     springs:     per level, (s_l, 2) int64 particle indices of each spring (level-local = fine indices)
     stiffness, damping, rest_length: per level, (s_l,) float64 [N/m], [N s/m], [m]
     mass:        per level, (n_l,) float64 [kg]
+    viscous:     per level, (s_l,) float64 [N s/m]: the isotropic dashpot of each spring (None: none)
     fp:          ti.f32 or ti.f64, the precision of the fields and kernels (the coarse factor is float64)
     sweeps:      block-Jacobi sweeps before and after each coarse correction (fixed per solver)
     omega:       the Jacobi weight (a runtime attribute: changing it compiles nothing)
     """
 
     def __init__(self, levels: list[Level], springs, stiffness, damping, rest_length, mass, fp=ti.f32,
-                 sweeps: int = 1, omega: float = DEFAULT_OMEGA, serial_below: int = SERIAL_BELOW):
+                 sweeps: int = 1, omega: float = DEFAULT_OMEGA, serial_below: int = SERIAL_BELOW, viscous=None):
         L = len(levels)
-        if L < 1 or not all(len(a) == L for a in (springs, stiffness, damping, rest_length, mass)):
+        if viscous is None:
+            viscous = [np.zeros(len(s)) for s in springs]
+        if L < 1 or not all(len(a) == L for a in (springs, stiffness, damping, rest_length, mass, viscous)):
             raise ValueError("need springs, stiffness, damping, rest_length and mass for every level")
         if not nested(levels):
             raise ValueError("the spring multigrid needs nested levels (a 4-8 rectangle hierarchy)")
@@ -149,10 +152,11 @@ class SpringMultigrid:
         self.end_b = blk.scalar(ti.i32, max(Ns, 1))
         self.k = blk.scalar(fp, max(Ns, 1))               # [N/m]
         self.kd = blk.scalar(fp, max(Ns, 1))              # [N s/m]
+        self.c = blk.scalar(fp, max(Ns, 1))               # [N s/m] isotropic dashpot
         self.rest = blk.scalar(fp, max(Ns, 1))            # [m]
         self.u = blk.vector(3, fp, max(Ns, 1))            # unit direction at the current positions
         self.axial = blk.scalar(fp, max(Ns, 1))           # h kd + h^2 k (1 - g) [kg]
-        self.iso = blk.scalar(fp, max(Ns, 1))             # h^2 k g [kg]
+        self.iso = blk.scalar(fp, max(Ns, 1))             # h^2 k g + h c [kg]
         self.par = blk.vector(3, ti.i32, N)
         self.pw = blk.vector(3, fp, N)
         self.r_ptr = blk.scalar(ti.i32, N + 1)
@@ -179,6 +183,7 @@ class SpringMultigrid:
             self.end_b.from_numpy(e[:, 1].astype(np.int32))
             self.k.from_numpy(cat(stiffness).astype(npf))
             self.kd.from_numpy(cat(damping).astype(npf))
+            self.c.from_numpy(cat(viscous).astype(npf))
             self.rest.from_numpy(cat(rest_length).astype(npf))
         self.par.from_numpy(par.astype(np.int32))
         self.pw.from_numpy(pw.astype(npf))
@@ -265,7 +270,7 @@ class SpringMultigrid:
             g = ti.max(0.0, 1.0 - self.rest[q] / ti.max(length, 1e-12))
             self.u[q] = ti.cast(u, self.fp)
             self.axial[q] = hh * self.kd[q] + hh * hh * self.k[q] * (1.0 - g)
-            self.iso[q] = hh * hh * self.k[q] * g
+            self.iso[q] = hh * hh * self.k[q] * g + hh * self.c[q]
         # pins: the simulated level's own (inverse mass 0), then every coarser level inherits them
         for l in ti.static(range(L)):
             ti.loop_config(serialize=ti.static(self.sizes[l] < self.serial_below))

@@ -79,7 +79,8 @@ class ClothBuilder:
         t_odd = np.concatenate([np.stack([c00, c10, c01], 1), np.stack([c10, c11, c01], 1)])
         mask = np.concatenate([even, even])
         triangles = np.where(mask[:, None], t_even, t_odd)
-        return ClothData(positions, mass, springs, rest, stiffness, damping, kind, triangles, (nu, nv))
+        return ClothData(positions, mass, springs, rest, stiffness, damping, kind, triangles, (nu, nv),
+                         viscosity=mat.viscosity)
 
     @staticmethod
     def multilevel_grid(size=(1.0, 1.0), base_cells=(4, 4), levels: int = 5, material: str | Material = "cotton",

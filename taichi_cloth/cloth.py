@@ -43,6 +43,7 @@ class ClothData:
     kind:        (S,)  int64        SpringKind
     triangles:   (T,3) int64        for rendering, normals and wind (may be empty for a chain)
     grid_shape:  (nu, nv) for grids (particle i + nu*j), else None
+    viscosity:   [m^2/s] the material's internal (membrane) viscosity: see viscous_damping
     """
 
     positions: np.ndarray
@@ -54,6 +55,7 @@ class ClothData:
     kind: np.ndarray
     triangles: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.int64))
     grid_shape: tuple[int, int] | None = None
+    viscosity: float = 0.0
 
     @property
     def n_particles(self) -> int:
@@ -65,6 +67,19 @@ class ClothData:
 
     def count(self, kind: SpringKind) -> int:
         return int(np.count_nonzero(self.kind == kind))
+
+    def viscous_damping(self) -> np.ndarray:
+        """(S,) float64 [N*s/m]: the isotropic dashpot c_s = viscosity * mu_s / L_s^2 of every mesh edge (structural
+        and shear springs; mu_s = m_a m_b / (m_a + m_b), L_s its rest length), 0 on bend and seam springs. It pulls
+        the velocities of neighbouring particles together (force c_s (v_b - v_a) on a), so a velocity difference
+        between neighbours decays at the rate viscosity / L_s^2 whatever the spacing: a velocity pattern of wavelength
+        lambda decays at about viscosity (2 pi / lambda)^2 (docs/algorithms.md, damping)."""
+        if self.viscosity == 0.0 or self.n_springs == 0:
+            return np.zeros(self.n_springs)
+        ma, mb = self.mass[self.springs[:, 0]], self.mass[self.springs[:, 1]]
+        mesh_edge = (self.kind == SpringKind.STRUCTURAL) | (self.kind == SpringKind.SHEAR)
+        return np.where(mesh_edge, self.viscosity * ma * mb / (ma + mb) / np.maximum(self.rest_length, 1e-12) ** 2,
+                        0.0)
 
 
 def in_plane(uv: np.ndarray, plane: str, center=(0.0, 0.0, 0.0)) -> np.ndarray:
@@ -129,4 +144,4 @@ def mesh_cloth(vertices, triangles, material: str | Material = "cotton", source:
     springs, rest, stiffness, damping, kind = spring_arrays(
         [edges, bend_pairs], [k_edge, mat.bend / np.maximum(Lb, 1e-12) ** 2],
         [SpringKind.STRUCTURAL, SpringKind.BEND], v, mat.damping)
-    return ClothData(v, mass, springs, rest, stiffness, damping, kind, t)
+    return ClothData(v, mass, springs, rest, stiffness, damping, kind, t, viscosity=mat.viscosity)

@@ -63,7 +63,8 @@ class ForceModel:
         d = self.state.x[j] - xi
         l = d.norm()
         u = d / ti.max(l, 1e-12)
-        return m.stiffness[s] * (l - m.rest_length[s]) * u + m.damping[s] * (self.state.v[j] - vi).dot(u) * u
+        dv = self.state.v[j] - vi
+        return m.stiffness[s] * (l - m.rest_length[s]) * u + m.damping[s] * dv.dot(u) * u + m.viscous[s] * dv
 
     @ti.func
     def source_force(self, i, xi, vi):

@@ -24,6 +24,9 @@ class Material:
     shear:   in-plane shear modulus [N/m]; the diagonal spring constant on a square grid.
     bend:    bending coefficient [N*m]; a bend spring of rest length L gets k = bend / L^2.
     damping: stiffness-proportional spring damping [s]; a spring of constant k gets kd = damping * k [N*s/m].
+    viscosity: internal (membrane) viscosity [m^2/s]: neighbouring particles' velocities are pulled together
+             (ClothData.viscous_damping), so a sway or a wrinkle of wavelength lambda loses its speed at about
+             viscosity * (2 pi / lambda)^2 per second, while a rigid motion and the rest shape are untouched.
     """
 
     density: float
@@ -31,6 +34,7 @@ class Material:
     shear: float
     bend: float
     damping: float = 0.0
+    viscosity: float = 0.0
 
     def __post_init__(self):
         for f in dataclasses.fields(self):
@@ -39,7 +43,7 @@ class Material:
                 raise ValueError(f"material {f.name} must be a number, got {v!r}")
         if self.density <= 0:
             raise ValueError(f"material density must be > 0 kg/m^2, got {self.density}")
-        for name in ("stretch", "shear", "bend", "damping"):
+        for name in ("stretch", "shear", "bend", "damping", "viscosity"):
             if getattr(self, name) < 0:
                 raise ValueError(f"material {name} must be >= 0, got {getattr(self, name)}")
 
@@ -59,10 +63,10 @@ class Material:
 #: Presets. Densities are typical fabric weights; moduli are engine values chosen so that the
 #: fabrics drape visibly differently at 1-2 cm spacing (silk flows, leather holds its shape).
 MATERIALS: dict[str, Material] = {
-    "silk": Material(density=0.06, stretch=500.0, shear=50.0, bend=2e-5, damping=2e-5),
-    "cotton": Material(density=0.15, stretch=2000.0, shear=200.0, bend=2e-4, damping=2e-5),
-    "denim": Material(density=0.40, stretch=8000.0, shear=1500.0, bend=2e-3, damping=2e-5),
-    "leather": Material(density=0.90, stretch=30000.0, shear=10000.0, bend=2e-2, damping=2e-5),
+    "silk": Material(density=0.06, stretch=500.0, shear=50.0, bend=2e-5, damping=2e-5, viscosity=2e-3),
+    "cotton": Material(density=0.15, stretch=2000.0, shear=200.0, bend=2e-4, damping=2e-5, viscosity=2e-3),
+    "denim": Material(density=0.40, stretch=8000.0, shear=1500.0, bend=2e-3, damping=2e-5, viscosity=2e-3),
+    "leather": Material(density=0.90, stretch=30000.0, shear=10000.0, bend=2e-2, damping=2e-5, viscosity=2e-3),
 }
 
 

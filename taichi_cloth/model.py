@@ -37,7 +37,8 @@ class Model:
     spring_a/b:   (S,) i32             endpoint indices
     rest_length:  (S,) fp [m]
     stiffness:    (S,) fp [N/m]
-    damping:      (S,) fp [N*s/m]
+    damping:      (S,) fp [N*s/m]      axial (along the spring)
+    viscous:      (S,) fp [N*s/m]      isotropic dashpot of a mesh edge (ClothData.viscous_damping)
     spring_kind:  (S,) i32             SpringKind
     stiffness_sum:(P,) fp [N/m]        sum of the spring constants at each particle (derived)
     adj_offset:   (P+1,) i32           CSR: the incidences of particle i are adj_offset[i]..adj_offset[i+1]
@@ -77,6 +78,7 @@ class Model:
         self.rest_length = blk.scalar(fp, max(cs, 1))
         self.stiffness = blk.scalar(fp, max(cs, 1))
         self.damping = blk.scalar(fp, max(cs, 1))
+        self.viscous = blk.scalar(fp, max(cs, 1))
         self.spring_kind = blk.scalar(ti.i32, max(cs, 1))
         self.stiffness_sum = blk.scalar(fp, cp)
         self.adj_offset = blk.scalar(ti.i32, cp + 1)
@@ -111,6 +113,7 @@ class Model:
         fill_prefix(self.rest_length, data.rest_length.astype(npfp))
         fill_prefix(self.stiffness, data.stiffness.astype(npfp))
         fill_prefix(self.damping, data.damping.astype(npfp))
+        fill_prefix(self.viscous, data.viscous_damping().astype(npfp))
         fill_prefix(self.spring_kind, data.kind.astype(np.int32))
         fill_prefix(self.stiffness_sum, self.stiffness_sum_np().astype(npfp))
         sid = np.arange(S)
@@ -155,6 +158,7 @@ class Model:
         self.data.mass = m
         self._omega = None
         fill_prefix(self.mass, m.astype(self.np_dtype))
+        fill_prefix(self.viscous, self.data.viscous_damping().astype(self.np_dtype))
         fill_prefix(self.inv_mass, np.where(self.pinned, 0.0, 1.0 / m).astype(self.np_dtype))
 
     @property
@@ -185,8 +189,9 @@ class Model:
         return self._omega
 
     def damping_ratio_max(self) -> float:
-        """max over springs of kd/k [s] (stiffness-proportional damping)."""
-        k, kd = self.data.stiffness, self.data.damping
+        """max over springs of (kd + c)/k [s]: the stiffness-proportional damping, with the viscous dashpot c of a
+        mesh edge (ClothData.viscous_damping) counted as more of it, which bounds the explicit steps alike."""
+        k, kd = self.data.stiffness, self.data.damping + self.data.viscous_damping()
         r = np.divide(kd, k, out=np.zeros_like(k), where=k > 0)
         return float(r.max()) if len(r) else 0.0
 

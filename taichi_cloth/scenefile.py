@@ -22,7 +22,8 @@ and a component whose table is absent is never built. The schema (units in brack
     center = [0.0, 1.0, 0.0]      # [m]
     plane = "xy"                  # "xy" (hanging), "xz" (horizontal), "yz", "zy"
     # [cloth.mesh] path = "flag.obj", scale = 1.0, translate = [0, 0, 0]
-    # [cloth.material] preset = "cotton", density [kg/m^2], stretch [N/m], shear [N/m], bend [N m], damping [s]
+    # [cloth.material] preset = "cotton", density [kg/m^2], stretch [N/m], shear [N/m], bend [N m], damping [s],
+    #                   viscosity [m^2/s]
 
     [integrator]
     name = "approx-implicit"      # explicit | verlet | central-difference | approx-implicit | implicit

@@ -96,7 +96,7 @@ KINDS: dict[str, tuple[Callable[[Any], bool], str]] = {
 MATERIAL_TABLE = Table({"preset": Field("str", None, choices=tuple(MATERIALS)),
                         "density": Field("number", None, positive), "stretch": Field("number", None, nonneg),
                         "shear": Field("number", None, nonneg), "bend": Field("number", None, nonneg),
-                        "damping": Field("number", None, nonneg)},
+                        "damping": Field("number", None, nonneg), "viscosity": Field("number", None, nonneg)},
                        allow_string=Field("str", choices=tuple(MATERIALS)))
 
 

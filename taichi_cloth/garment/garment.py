@@ -233,7 +233,7 @@ def build_garment(spec: GarmentSpec, body: Body | None = None, seam_stiffness: f
         stiffness=np.concatenate([data.stiffness, np.full(K, k_s)]),
         damping=np.concatenate([data.damping, np.full(K, mat.damping * k_s)]),
         kind=np.concatenate([data.kind, np.full(K, int(SpringKind.SEAM), np.int64)]),
-        triangles=data.triangles)
+        triangles=data.triangles, viscosity=data.viscosity)
 
     fixed, targets = _fixed_points(spec, meshes, offsets, index, placed, body)
     cloth.positions[fixed] = targets

@@ -3,7 +3,8 @@ material and placement of a garment; every length is in the file's `units`.
 
     name = "skirt"
     units = "cm"                  # m | cm | mm | in: every length below (outline, spacing, at, offset, height)
-    material = "cotton"           # a preset, or a table: preset, density [kg/m^2], stretch [N/m], shear, bend, damping
+    material = "cotton"           # a preset, or a table: preset, density [kg/m^2], stretch [N/m], shear, bend, damping,
+                                  # viscosity [m^2/s]
     spacing = 2.0                 # particle spacing along the outlines (and the interior lattice cell)
     levels = 1                    # 4-8 levels meshed per piece (the finest, at `spacing`, is simulated)
     # dxf = "skirt.dxf"           # pieces from a DXF file: a [[pieces]] entry without `outline` takes the DXF

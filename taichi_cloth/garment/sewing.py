@@ -202,7 +202,8 @@ class Sewing(Controller):
             k = self.options.join_stiffness or 10.0 * float(data.stiffness[seam].max())
             data = ClothData(x, data.mass, data.springs, np.where(seam, 0.0, data.rest_length),
                              np.where(seam, k, data.stiffness),
-                             np.where(seam, self.garment.material.damping * k, data.damping), data.kind, data.triangles)
+                             np.where(seam, self.garment.material.damping * k, data.damping), data.kind, data.triangles,
+                             viscosity=data.viscosity)
         elif join == "merge":
             data, x, v, self.current_of = merge_seams(data, self.garment, x, v)
         what = {"merge": "pairs merged", "spring": "pairs joined by stiff springs", "none": "seam springs kept"}[join]
@@ -262,7 +263,7 @@ def merge_seams(data: ClothData, garment, x: np.ndarray, v: np.ndarray):
         k = np.concatenate([k, kb])
         kd = np.concatenate([kd, garment.material.damping * kb])
         kind = np.concatenate([kind, np.full(int(new.sum()), int(SpringKind.BEND), np.int64)])
-    merged = ClothData(mx, mass, springs, rest, k, kd, kind, tris)
+    merged = ClothData(mx, mass, springs, rest, k, kd, kind, tris, viscosity=data.viscosity)
     return merged, mx, mv, current_of
 
 

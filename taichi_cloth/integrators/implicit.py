@@ -6,10 +6,10 @@ Gast et al. 2015, "optimization integrator for large time steps")
 
     IP(v) = 1/2 (v - v0)^T M (v - v0) + Phi(x0 + h v) + h/2 v^T C v - h F_ext . v,
 
-Phi = spring + gravity potential [J], C = gamma M + sum_s kd u u^T (air drag and spring damping, u frozen per
-Newton iteration), F_ext the wind and body repulsion at the iterate. Its gradient is M (v - v0) - h f(x0 + h v, v)
-with f the engine's total force, so IP is stationary exactly at the backward-Euler step. Newton iteration k, from
-v_k (x_k = x0 + h v_k):
+Phi = spring + gravity potential [J], C = gamma M + sum_s (kd u u^T + c I) (air drag, spring damping and the
+viscous dashpots of the mesh edges, u frozen per Newton iteration), F_ext the wind and body repulsion at the
+iterate. Its gradient is M (v - v0) - h f(x0 + h v, v) with f the engine's total force, so IP is stationary
+exactly at the backward-Euler step. Newton iteration k, from v_k (x_k = x0 + h v_k):
 
     A dv = b,  A = M (1 + h gamma) + h D + h^2 K(x_k),  b = h f(x_k, v_k) - M (v_k - v0)
 
@@ -18,8 +18,8 @@ classical one-solve step of Baraff and Witkin (equal to Newton's first iteration
 
 per spring (u = unit direction, l = length, L0 = rest length):
     K_s = k [ u u^T + max(0, 1 - L0/l) (I - u u^T) ]   (stiffness; the clamp keeps A SPD, Choi and Ko 2002)
-    D_s = kd u u^T                                     (spring damping)
-so (A q)_i = m_i (1 + h gamma) q_i + sum_s [ (h kd + h^2 k (1-g)) u (u.dq) + h^2 k g dq ], dq = q_i - q_j,
+    D_s = kd u u^T + c I                               (spring damping, viscous dashpot)
+so (A q)_i = m_i (1 + h gamma) q_i + sum_s [ (h kd + h^2 k (1-g)) u (u.dq) + (h^2 k g + h c) dq ], dq = q_i - q_j,
 evaluated matrix-free with a per-particle gather. Then a line search: IP at v_k + alpha dv for alpha = 1, 1/2, 1/4,
 1/8 in one kernel, the largest alpha with IP(v_k + alpha dv) <= IP(v_k) + 1e-4 alpha grad.dv is taken (on the
 device: no host read-back). One Newton iteration with alpha = 1 is the classical one-solve-per-step implicit
@@ -97,7 +97,7 @@ class Implicit(Integrator):
         blk = FieldBlock()
         self.spring_u = blk.vector(3, fp, S)  # unit direction a -> b
         self.spring_axial = blk.scalar(fp, S)         # h kd + h^2 k (1 - g)   [kg/s]
-        self.spring_iso = blk.scalar(fp, S)           # h^2 k g                 [kg]
+        self.spring_iso = blk.scalar(fp, S)           # h^2 k g + h c           [kg]
         self.b = blk.vector(3, fp, P)
         self.inv_diag = blk.matrix(3, 3, fp, P)  # Jacobi: the inverse 3x3 diagonal blocks of the filtered A
         self.dv, self.r, self.z, self.p, self.q = (blk.vector(3, fp, P) for _ in range(5))
@@ -143,6 +143,7 @@ class Implicit(Integrator):
         self.multigrid = SpringMultigrid(levels, [d.springs for d in cloth_levels], [d.stiffness for d in cloth_levels],
                                          [d.damping for d in cloth_levels], [d.rest_length for d in cloth_levels],
                                          [d.mass for d in cloth_levels], fp=self.model.fp,
+                                         viscous=[d.viscous_damping() for d in cloth_levels],
                                          serial_below=1 << 62 if self.model.serial else SERIAL_BELOW)
         self.multigrid.set_active_level(level)
         self.warm[None] = 0
@@ -351,7 +352,7 @@ class Implicit(Integrator):
             k = m.stiffness[sp]
             self.spring_u[sp] = u
             self.spring_axial[sp] = h * m.damping[sp] + h * h * k * (1.0 - g)
-            self.spring_iso[sp] = h * h * k * g
+            self.spring_iso[sp] = h * h * k * g + h * m.viscous[sp]
         mass_scale = 1.0 + h * fm.air_damping[None]
         ti.loop_config(serialize=self.model.serial)
         for i in range(m.n_particles[None]):
@@ -369,7 +370,8 @@ class Implicit(Integrator):
                     diag += self.spring_axial[sp] * u.outer_product(u) + self.spring_iso[sp] * eye
                     if first != 0:
                         dvel = s.v[i] - s.v[m.adj_other[e]]
-                        kv += (self.spring_axial[sp] - h * m.damping[sp]) * u.dot(dvel) * u + self.spring_iso[sp] * dvel
+                        kv += (self.spring_axial[sp] - h * m.damping[sp]) * u.dot(dvel) * u \
+                            + (self.spring_iso[sp] - h * m.viscous[sp]) * dvel
                 self.b[i] = self.contact_filter(i, h * f - kv - m.mass[i] * self.dv_total[i])
                 # the block of the filtered system S A S + M' (I - S): on a contact the tangential block, whose
                 # inverse is not the per-axis one (on the T-shirt resting on the body: 143 -> 80 CG its per step)
@@ -519,6 +521,7 @@ class Implicit(Integrator):
         ia, ib = m.spring_a[sp], m.spring_b[sp]
         k = ti.cast(m.stiffness[sp], ti.f64)
         kd = ti.cast(m.damping[sp], ti.f64)
+        c = ti.cast(m.viscous[sp], ti.f64)
         L0 = ti.cast(m.rest_length[sp], ti.f64)
         u = ti.cast(self.spring_u[sp], ti.f64)
         wa = ti.cast(m.inv_mass[ia] != 0, ti.f64)
@@ -530,8 +533,9 @@ class Implicit(Integrator):
             xa = ti.cast(self.x0[ia], ti.f64) + wa * hh * va
             xb = ti.cast(self.x0[ib], ti.f64) + wb * hh * vb
             stretch = (xb - xa).norm() - L0
-            rel = (vb - va).dot(u)
-            self.ip[j] += 0.5 * k * stretch * stretch + 0.5 * hh * kd * rel * rel
+            dvel = vb - va
+            rel = dvel.dot(u)
+            self.ip[j] += 0.5 * k * stretch * stretch + 0.5 * hh * (kd * rel * rel + c * dvel.dot(dvel))
             self.energy[j] += 0.5 * k * stretch * stretch
 
     @ti.kernel
