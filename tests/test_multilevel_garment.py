@@ -127,7 +127,8 @@ def test_sewn_on_level_1_and_refined_to_level_3_keeps_seams_mass_momentum_and_ne
 
 
 def test_scene_file_runs_a_garment_coarse_to_fine_and_names_bad_tables(tmp_path):
-    scene = {"cloth": {"garment": str(DEMOS / "garments" / "skirt.toml")}, "integrator": {"name": "implicit", "dt": 1 / 120},
+    scene = {"cloth": {"garment": str(DEMOS / "garments" / "skirt.toml")},
+             "integrator": {"name": "implicit", "dt": 1 / 120},
              "multilevel": {"levels": 2, "start_level": 1}, "colliders": [{"type": "mesh", "path": "mannequin"}]}
     loaded = load_scene(scene, out=tmp_path)
     sc = loaded.scene
@@ -140,3 +141,23 @@ def test_scene_file_runs_a_garment_coarse_to_fine_and_names_bad_tables(tmp_path)
         load_scene(dict(scene, sewing={"join": "spring"}), out=tmp_path)
     with pytest.raises(SceneError, match="levels >= 2"):
         load_scene(dict(scene, multilevel={"levels": 1}), out=tmp_path)
+
+
+def test_recording_and_self_collision_follow_the_switches(tmp_path):
+    from test_recording_and_cli import rows_by_entity
+
+    mg = multilevel_garment(two_squares(), start_level=0)
+    scene = tc.Scene(mg, integrator="implicit", dt=1 / 120, colliders=[SPHERE], self_collision=True,
+                     multilevel=dict(max_time=0.25))
+    rec = tc.Recorder(tmp_path / "levels.rrd")
+    summary = scene.run(100, recorder=rec, progress=False)
+    rec.close()
+    assert [s.level for s in scene.controller("refiner").switches] == [0, 1, 2]
+    assert [e.split(" at t")[0] for e in summary.events] == ["seams closed", "level 2", "level 3"]
+    got = rows_by_entity(tmp_path / "levels.rrd")
+    assert len(got["/cloth/events"][1]) == 3  # the merge and one event per switch
+    assert got["/cloth/mesh"][0] == 0  # the topology is on the timeline
+    assert len(got["/metrics/cloth/level"][1]) == 101
+    # the run ends on level 3 with self-collision on (it was given every level's mesh), nothing inside the sphere
+    assert scene.model.n_particles[None] == mg.cloth.levels[2].n_particles
+    assert np.linalg.norm(scene.positions(), axis=1).min() >= 0.2
