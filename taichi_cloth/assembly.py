@@ -61,7 +61,8 @@ def assemble(cloth, *, name: str = "cloth", integrator: str = DEFAULT_INTEGRATOR
              base_dir=None) -> SceneParts:
     """The parts of a scene (Scene(cloth, **options) calls this). Units are SI.
 
-    cloth:              ClothData, a Model, a MultilevelCloth (ClothBuilder.multilevel_grid) or a GarmentCloth
+    cloth:              ClothData, a Model, a MultilevelCloth (ClothBuilder.multilevel_grid), a GarmentCloth, or a
+                        MultilevelGarment (taichi_cloth.garment.levels: sewn on its start level, refined once joined)
     integrator:         "explicit" | "verlet" | "central-difference" | "approx-implicit" | "implicit" (default:
                         implicit, without a step limit and accurate; see docs/integrators.md)
     dt:                 time step [s], or "auto": chosen before every frame from the integrator's stable step
@@ -77,10 +78,10 @@ def assemble(cloth, *, name: str = "cloth", integrator: str = DEFAULT_INTEGRATOR
                         every step, in order
     self_collision:     False, True, or SelfCollision keyword arguments (thickness, friction): the cloth against its
                         own triangles, resolved before the colliders
-    multilevel:         for a MultilevelCloth: SettleCriterion keyword arguments (max_speed, energy_change, window,
-                        max_time), refine ("global" = True, "local", or "none" = False), angle (local refinement:
-                        the dihedral angle [deg] that calls for it, default 20) and dt_growth (step multiplier per
-                        level below the finest; dt is the finest level's step; default 1)
+    multilevel:         for a MultilevelCloth or a MultilevelGarment: SettleCriterion keyword arguments (max_speed,
+                        energy_change, window, max_time), refine ("global" = True, "local", or "none" = False),
+                        angle (local refinement: the dihedral angle [deg] that calls for it, default 20) and dt_growth
+                        (step multiplier per level below the finest; dt is the finest level's step; default 1)
     sewing:             for a GarmentCloth: SewingOptions keyword arguments (close_speed, max_force, epsilon,
                         energy_tolerance, gravity, join, join_stiffness, max_time)
     body_morph:         weights (channel -> [-1, 1]), duration [s], start ([s] or "sewn"), blend (default: the
@@ -140,11 +141,13 @@ def assemble(cloth, *, name: str = "cloth", integrator: str = DEFAULT_INTEGRATOR
         clock = FixedStep(dt, fps)
 
     limit = StretchLimit(model, state, **stretch_limit) if stretch_limit else None
-    sew = _sewing(model, state, forces, source.garment, sewing) if source.garment is not None else None
+    sew = _sewing(model, state, forces, source.garment, sewing, source.garment_levels) \
+        if source.garment is not None else None
     morph = _body_morph(body_morph, collide, sew, clock.dt) if body_morph is not None else None
     refiner = None
     if source.multilevel is not None:
-        refiner = _refiner(model, state, source.multilevel, multilevel, gravity)
+        ready = (lambda: sew.joined) if sew is not None else None  # a garment refines once its seams are joined
+        refiner = _refiner(model, state, source.multilevel, multilevel, gravity, ready)
         clock.model_changed(refiner.dt_scale(refiner.level))
     strain_map = None
     if source.garment is not None:
@@ -184,12 +187,20 @@ class _Source:
     pins: list
     multilevel: object = None
     garment: object = None
+    garment_levels: object = None
 
 
 def _cloth_source(cloth, precision: str, multilevel, sewing) -> _Source:
     from .garment.garment import GarmentCloth
+    from .garment.levels import MultilevelGarment
     from .multilevel_cloth import MultilevelCloth
 
+    if isinstance(cloth, MultilevelGarment):  # the pieces apart on the start level, then the merged levels
+        g = cloth.garment
+        model = Model(g.data, precision, capacity=cloth.capacity)
+        fixed = [PinSpec(near=g.fixed_targets)] if len(g.fixed) else []
+        return _Source(model, [g.data] + list(cloth.cloth.levels), fixed, multilevel=cloth.cloth, garment=g,
+                       garment_levels=cloth)
     if isinstance(cloth, MultilevelCloth):
         if sewing is not None:
             raise SceneError("[sewing] needs a garment cloth (a garment file, or taichi_cloth.garment.build_garment)")
@@ -258,22 +269,23 @@ def _attach_levels(stepper, integrator: str, source: _Source, multilevel, specs,
         warn(msg)
 
 
-def _sewing(model, state, forces, garment, options: dict | None):
+def _sewing(model, state, forces, garment, options: dict | None, levels=None):
     from .garment.sewing import Sewing, SewingOptions
 
     try:
-        return Sewing(model, state, forces, garment, SewingOptions(**(options or {})))
+        return Sewing(model, state, forces, garment, SewingOptions(**(options or {})), levels)
     except (TypeError, ValueError) as err:
         raise SceneError(f"sewing: {err}") from None
 
 
-def _refiner(model, state, cloth, options: dict | None, gravity):
+def _refiner(model, state, cloth, options: dict | None, gravity, ready=None):
     from .refiner import Refiner, SettleCriterion
 
     opts = dict(options or {})
     refine, dt_growth, angle = opts.pop("refine", True), opts.pop("dt_growth", 1.0), opts.pop("angle", 20.0)
     try:
-        return Refiner(model, state, state.contacts, cloth, SettleCriterion(**opts), refine, dt_growth, angle, gravity)
+        return Refiner(model, state, state.contacts, cloth, SettleCriterion(**opts), refine, dt_growth, angle, gravity,
+                       ready)
     except (TypeError, ValueError) as err:
         raise SceneError(f"multilevel: {err}") from None
 
@@ -315,7 +327,10 @@ def _check_step(guard: str, stepper, model, forces, clock, source: _Source, spec
         candidates = [("", clock.step_for(bound) if clock.auto else clock.dt, bound)]
     else:
         candidates = []
-        for k, data in enumerate(source.levels):
+        levels = list(enumerate(refiner.cloth.levels))
+        if source.garment is not None:  # the pieces apart, sewn on the start level
+            levels.append((refiner.cloth.start_level, source.garment.data))
+        for k, data in levels:
             bound = stable_dt(cls, model, air, omega=omega_max_estimate(data, pinned_mask(specs, data.positions)))
             candidates.append((f" on level {k + 1}", clock.step_for(bound) if clock.auto
                                else clock.base * refiner.dt_scale(k), bound))

@@ -81,7 +81,7 @@ def grid_particles(cfg: dict) -> tuple[int, str] | None:
     None for a mesh or garment cloth (its file's size bounds it). A 4-8 level roughly doubles the vertices of the
     one below it, and a multilevel cloth keeps every level."""
     grid, ml = cfg["cloth"].get("grid"), cfg.get("multilevel")
-    if ml is not None:
+    if ml is not None and grid is not None:
         nx, ny = ml["base_cells"]
         return 2 * (nx + 1) * (ny + 1) * 2 ** (ml["levels"] - 1), \
             f"[multilevel] base_cells {nx} x {ny}, levels {ml['levels']}"

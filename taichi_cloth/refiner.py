@@ -14,6 +14,7 @@ never deeper than the hierarchy's finest level, so the fields' capacity still ho
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 
@@ -61,7 +62,9 @@ class Refiner(Controller):
     """The level schedule of a scene whose cloth is a MultilevelCloth (a controller).
 
     model, state: the scene's; contacts: its Contacts (or None: no colliders); cloth: the MultilevelCloth;
-    gravity: (3,) [m/s^2] for the energy scale of the settle criterion.
+    gravity: (3,) [m/s^2] for the energy scale of the settle criterion; ready: a callable that says when the level
+    schedule may begin (a garment: once its seams are joined; None: at once). Until then no frame counts toward
+    the settle criterion, and a reset leaves the model to the controller it waits for.
     level:    the current level (0-based; the first paper's N = level + 1)
     switches: the LevelSwitch history (the start level first)
     settled:  whether the settle criterion held at the last observed frame
@@ -71,10 +74,12 @@ class Refiner(Controller):
     changes_topology = True
 
     def __init__(self, model, state, contacts, cloth, settle: SettleCriterion | None = None,
-                 refine: bool | str = True, dt_growth: float = 1.0, angle: float = 20.0, gravity=(0.0, -9.81, 0.0)):
+                 refine: bool | str = True, dt_growth: float = 1.0, angle: float = 20.0, gravity=(0.0, -9.81, 0.0),
+                 ready: Callable[[], bool] | None = None):
         from multilevel.prolong import Prolongation
 
         self.model, self.state, self.contacts, self.cloth = model, state, contacts, cloth
+        self.ready = ready
         self.settle = settle or SettleCriterion()
         mode = {True: "global", False: "none"}.get(refine, refine)
         if mode not in ("global", "local", "none"):
@@ -96,6 +101,10 @@ class Refiner(Controller):
         finest = cloth.levels[-1]
         diameter = float(np.linalg.norm(np.ptp(finest.positions, axis=0)))
         self.energy_scale = max(float(finest.mass.sum()) * float(np.linalg.norm(gravity)) * diameter, 1e-12)
+        # levels whose tables do not carry momentum over exactly (an outline's band: the coarse masses are not the
+        # fine masses restricted); a switch onto one adds the difference back as a uniform velocity
+        self.lossy = [k > 0 and not _keeps_momentum(cloth.hierarchy.levels[k], cloth.levels[k - 1].mass,
+                                                    cloth.levels[k].mass) for k in range(cloth.n_levels)]
         self._steps = 0
         self._restart()
 
@@ -111,8 +120,11 @@ class Refiner(Controller):
         self.switches = [LevelSwitch(self.level, 0.0, 0)]
 
     def reset(self) -> ModelChange | None:
-        """Back to the start level (the model is refilled with it, the state at its rest shape)."""
+        """Back to the start level (the model is refilled with it, the state at its rest shape; with `ready`, the
+        controller it waits for refills the model)."""
         self._restart()
+        if self.ready is not None:
+            return None
         data = self.cloth.levels[self.level]
         if self.model.data is data:
             return None
@@ -136,6 +148,9 @@ class Refiner(Controller):
         """Feed one frame's measurement; refine when the level has settled (or used its time budget)."""
         m = frame.measurement
         self._steps = frame.steps
+        if self.ready is not None and not self.ready():
+            self._level_t0 = frame.t  # the level's time budget starts when the schedule does
+            return None
         self._energies.append(m.total)
         w = self.settle.window
         calm = len(self._energies) > w and abs(self._energies[-1] - self._energies[-1 - w]) < (
@@ -156,6 +171,7 @@ class Refiner(Controller):
         if self.at_finest:
             raise ValueError("the cloth is already at its finest level")
         n_old = self.model.data.n_particles
+        old = self.model.data
         if self.mode == "local":
             from multilevel.hierarchy import refine_local
 
@@ -177,8 +193,14 @@ class Refiner(Controller):
         self.settled = False
         self.switches.append(LevelSwitch(self.level, t, self._steps))
 
+        lossy = self.mode == "global" and self.lossy[self.level]
+        momentum = (old.mass[:, None] * self.state.velocities()).sum(0) if lossy else None
+
         def prolong(state, n_before):
             self.prolongation.apply(mesh, state.x, state.v, n_before)
+            if lossy:
+                v = state.velocities()
+                state.set(v=v + (momentum - (data.mass[:, None] * v).sum(0)) / data.mass.sum())
 
         return ModelChange(data=data, prolong=prolong, level=self.level, dt_scale=self.dt_scale(self.level),
                            topology=True, event=f"level {self.level + 1} at t = {t:.3f} s: {data.n_particles} "
@@ -213,3 +235,12 @@ class Refiner(Controller):
             touching = np.linalg.norm(contacts.normal.to_numpy()[: len(x)], axis=1) > 0
             marked |= touching[tri].any(axis=1)
         return marked
+
+
+def _keeps_momentum(level, coarse_mass: np.ndarray, fine_mass: np.ndarray) -> bool:
+    """Whether prolonging velocities onto `level` keeps the momentum exactly: every coarse mass is the sum of the
+    fine masses it contributes to, weighted (the restriction of the fine masses), to round-off."""
+    restricted = np.zeros(len(coarse_mass))
+    live = level.parents >= 0
+    np.add.at(restricted, level.parents[live], (level.weights * fine_mass[:, None])[live])
+    return bool(np.abs(restricted - coarse_mass).max() <= 1e-12 * coarse_mass.max())

@@ -45,10 +45,12 @@ and a component whose table is absent is never built. The schema (units in brack
                                   # mode = "fuzzy" | "exact", repulsion = {stiffness [N], distance [m],
                                   # max_force [N]}) | "standin" (spheres and capsules for the mannequin);
                                   # all: thickness [m] = 0.003, friction = 0.3
-    [multilevel]                  # a 4-8 hierarchy over [cloth.grid] (no resolution there): coarse first,
-    levels = 5                    # refined as the drape settles (Hsiao 2006 section 2.2); 1..8
+    [multilevel]                  # a 4-8 hierarchy over [cloth.grid] (no resolution there) or a garment's pieces:
+    levels = 5                    # coarse first, refined as the drape settles (Hsiao 2006 section 2.2); 1..8
+                                  # (a garment: 2..6, default the garment file's `levels`, its finest at its spacing)
     base_cells = [4, 4]           # cells of level 1 (alternating diagonals); each level bisects every triangle
-    start_level = 1               # the level the run starts on (levels: only the finest)
+    start_level = 1               # the level the run starts on (levels: only the finest); a garment is placed, sewn
+                                  # and merged on it, then refined once its seams are joined
     refine = "global"             # "global" (every triangle), "local" (where the dihedral angle across a
                                   # hypotenuse exceeds `angle` = 20 [deg] or a collider touches), "none"
     dt_growth = 1.0               # dt multiplier per level below the finest ([integrator] dt is the finest's)
@@ -142,7 +144,7 @@ SCHEMA = Table({
                             "max_force": Field("number", 0.05, positive)}),
         "thickness": Field("number", 0.003, positive), "friction": Field("number", 0.3, nonneg)})),
     "multilevel": Table({
-        "levels": Field("int", 5, lambda v: None if 1 <= v <= 8 else "must lie in 1..8"),
+        "levels": Field("int", None, lambda v: None if 1 <= v <= 8 else "must lie in 1..8"),
         "base_cells": Field("int2", [4, 4], lambda v: None if min(v) >= 1 else "must be >= 1 each"),
         "start_level": Field("int", 1, at_least(1)),
         "refine": Field("str", "global", choices=("global", "local", "none")),
@@ -205,12 +207,15 @@ def parse_scene(source: str | Path | dict, base_dir: Path | None = None, label: 
     _check_integrator_options(v, cfg["integrator"])
     ml, grid = cfg.get("multilevel"), cloth.get("grid")
     if ml is not None:
-        if grid is None:
-            v.fail("[multilevel]", "needs a [cloth.grid] (the rectangle the 4-8 hierarchy covers)")
-        if grid["resolution"] is not None:
+        garment = cloth.get("garment") is not None
+        if grid is None and not garment:
+            v.fail("[multilevel]", "needs a [cloth.grid] (the rectangle the 4-8 hierarchy covers) or a garment")
+        if grid is not None and grid["resolution"] is not None:
             v.fail("[cloth.grid] resolution", "with [multilevel] the resolution comes from base_cells and levels; "
                                               "remove it")
-        if ml["start_level"] > ml["levels"]:
+        if ml["levels"] is None and not garment:
+            ml["levels"] = 5
+        if ml["levels"] is not None and ml["start_level"] > ml["levels"]:
             v.fail("[multilevel] start_level", f"must be <= levels ({ml['levels']}), got {ml['start_level']}")
     elif grid is not None and grid["resolution"] is None:
         v.fail("[cloth.grid]", "missing required key 'resolution'")
@@ -277,7 +282,7 @@ def build_scene(cfg: dict) -> Scene:
         body, body_morph, colliders = _body(cfg["body"], colliders, label)
     try:
         ml = cfg.get("multilevel")
-        if ml is not None:
+        if ml is not None and cloth_cfg.get("grid") is not None:
             g = cloth_cfg["grid"]
             data = ClothBuilder.multilevel_grid(g["size"], ml["base_cells"], ml["levels"], mat, g["center"],
                                                 g["plane"], ml["start_level"] - 1)
@@ -291,7 +296,14 @@ def build_scene(cfg: dict) -> Scene:
             path = Path(cloth_cfg["garment"])
             path = path if path.is_absolute() else cfg["_base_dir"] / path
             spec = load_garment(path, material=mat if cloth_cfg.get("material") else None)
-            data = build_garment(spec, body, seam_stiffness=(cfg.get("sewing") or {}).get("stiffness"))
+            stiffness = (cfg.get("sewing") or {}).get("stiffness")
+            if ml is None:
+                data = build_garment(spec, body, seam_stiffness=stiffness)
+            else:  # sewn on a coarse level, refined as the drape settles
+                from .garment.levels import multilevel_garment
+
+                spec.levels = ml["levels"] or spec.levels
+                data = multilevel_garment(spec, body, stiffness, ml["start_level"] - 1)
         else:
             m = cloth_cfg["mesh"]
             path = Path(m["path"])
@@ -372,7 +384,7 @@ def _apply_quality(cfg: dict) -> None:
     if p.dt_bound_fraction is not None:
         cfg["integrator"]["adaptive"] = {"safety": p.dt_bound_fraction}
     ml, grid = cfg.get("multilevel"), cfg["cloth"].get("grid")
-    if p.level < 0 and ml is not None:
+    if p.level < 0 and ml is not None and grid is not None:
         ml["levels"] = max(1, ml["levels"] + p.level)
         ml["start_level"] = min(ml["start_level"], ml["levels"])
     elif p.level < 0 and grid is not None:

@@ -16,7 +16,7 @@ from ..cloth import ClothData, SpringKind, mesh_cloth
 from ..errors import PatternError
 from ..material import Material
 from ..material import material as as_material
-from .mesh import PieceMesh, mesh_piece
+from .mesh import level_mesh, mesh_piece
 from .pattern import PatternPiece
 from .placement import Body, place
 from .seams import pair_sides, plan_counts, side_vertices
@@ -180,9 +180,18 @@ class GarmentCloth:
 
 
 def build_garment(spec: GarmentSpec, body: Body | None = None, seam_stiffness: float | None = None) -> GarmentCloth:
-    """Mesh, pair, place and assemble a garment. body: the Body to place on (default: the shipped mannequin).
-    seam_stiffness [N/m]: the seam springs' constant (default: the material's sheet modulus / 2, about the
-    constant of one interior spring of the pieces)."""
+    """Mesh, pair, place and assemble a garment on its finest level. body: the Body to place on (default: the
+    shipped mannequin). seam_stiffness [N/m]: the seam springs' constant (default: the material's sheet modulus / 2,
+    about the constant of one interior spring of the pieces)."""
+    return build_garment_levels(spec, body, seam_stiffness, levels=[spec.levels - 1])[0]
+
+
+def build_garment_levels(spec: GarmentSpec, body: Body | None = None, seam_stiffness: float | None = None,
+                         levels=None) -> list[GarmentCloth]:
+    """A GarmentCloth per 4-8 level of the garment (0-based `levels`, default all, coarsest first): the pieces are
+    meshed once as hierarchies, so the levels share their outlines and their seam counts (a seam pairs its sides
+    on every level). Every level carries the finest level's total mass (the outlines are resampled per level, so
+    their areas differ slightly), so that a level switch keeps the mass."""
     spec.validate()
     mat = as_material(spec.material)
     needs_body = any(not isinstance(p, FreePlacement) for p in spec.placements.values()) or any(
@@ -194,8 +203,23 @@ def build_garment(spec: GarmentSpec, body: Body | None = None, seam_stiffness: f
     lengths = {n: np.array([s.length(tol / 10) for s in p.segments]) for n, p in pieces.items()}
     base_spacing = spec.spacing * 2 ** ((spec.levels - 1) // 2)
     counts, routes = plan_counts(pieces, spec.seams, base_spacing, lengths)
-    meshes: list[PieceMesh] = [mesh_piece(p, base_spacing, counts[p.name], levels=spec.levels, tolerance=tol)
-                               for p in spec.pieces]
+    finest = [mesh_piece(p, base_spacing, counts[p.name], levels=spec.levels, tolerance=tol) for p in spec.pieces]
+    k_s = mat.sheet_modulus / 2 if seam_stiffness is None else float(seam_stiffness)
+    if not k_s > 0:
+        raise PatternError(f"garment {spec.name!r}: seam stiffness must be > 0 N/m, got {seam_stiffness!r}")
+    wanted = range(spec.levels) if levels is None else levels
+    out = []
+    total = mat.density * sum(m.area for m in finest)  # [kg] what the finest level's triangles weigh
+    for k in wanted:
+        g = _assemble(spec, [level_mesh(m, k) for m in finest], routes, mat, body, k_s)
+        if k != spec.levels - 1:
+            g.data.mass *= total / g.data.mass.sum()
+        out.append(g)
+    return out
+
+
+def _assemble(spec: GarmentSpec, meshes: list, routes: dict, mat: Material, body, k_s: float) -> GarmentCloth:
+    """The GarmentCloth of one level's piece meshes: springs from the 2D rest shape, placed, seams paired."""
     offsets = np.concatenate([[0], np.cumsum([m.n_vertices for m in meshes])]).astype(np.int64)
     index = {m.piece.name: k for k, m in enumerate(meshes)}
 
@@ -221,9 +245,6 @@ def build_garment(spec: GarmentSpec, body: Body | None = None, seam_stiffness: f
     seam_pairs = np.concatenate(pairs) if pairs else np.zeros((0, 2), np.int64)
     seam_of_pair = np.concatenate(owner) if owner else np.zeros(0, np.int64)
 
-    k_s = mat.sheet_modulus / 2 if seam_stiffness is None else float(seam_stiffness)
-    if not k_s > 0:
-        raise PatternError(f"garment {spec.name!r}: seam stiffness must be > 0 N/m, got {seam_stiffness!r}")
     gap = np.linalg.norm(placed[seam_pairs[:, 1]] - placed[seam_pairs[:, 0]], axis=1)
     K = len(seam_pairs)
     cloth = ClothData(

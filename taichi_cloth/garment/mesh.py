@@ -119,3 +119,15 @@ def mesh_piece(piece: PatternPiece, spacing: float, segment_counts=None, levels:
     check_quality(piece.name, quality, min_angle)
     return PieceMesh(piece, lev.uv, lev.triangles.astype(np.int64), lev.boundary_segments,
                      lev.boundary_loop, quality, hierarchy, k)
+
+
+def level_mesh(mesh: PieceMesh, level: int, min_angle: float = MIN_ANGLE_DEG) -> PieceMesh:
+    """The PieceMesh of another level (0-based) of `mesh`'s hierarchy (the same outline and seam counts), checked
+    for inverted triangles and slivers like the level it was meshed on."""
+    if level == mesh.level:
+        return mesh
+    lev = mesh.hierarchy.levels[level]
+    quality = mesh_quality(lev.uv, lev.triangles, min_angle)
+    check_quality(f"{mesh.piece.name} (level {level + 1})", quality, min_angle)
+    return PieceMesh(mesh.piece, lev.uv, lev.triangles.astype(np.int64), lev.boundary_segments,
+                     lev.boundary_loop, quality, mesh.hierarchy, level)

@@ -74,7 +74,10 @@ class SeamGap:
 class Sewing(Controller):
     """Closes the seams of a scene whose cloth is a GarmentCloth (a controller; one kernel, compiled once).
 
-    model, state, forces: the scene's; garment: the GarmentCloth; options: SewingOptions.
+    model, state, forces: the scene's; garment: the GarmentCloth; options: SewingOptions; levels: for a garment run
+    coarse to fine, its MultilevelGarment (taichi_cloth.garment.levels): `garment` is then its start level's, and
+    after a level switch `garment` and `current_of` are the new level's (the seam gaps, the recording and the
+    quality table follow the level).
     active:     True while sewing; closed_at: simulated time [s] the seams closed (None before)
     joined:     the seams were joined; gave_up: sewing stopped at max_time with seams open
     wall:       wall-clock seconds from the first step while sewing to the join, kernel compiles included
@@ -84,10 +87,13 @@ class Sewing(Controller):
 
     name = "sewing"
 
-    def __init__(self, model, state, forces, garment, options: SewingOptions):
+    def __init__(self, model, state, forces, garment, options: SewingOptions, levels=None):
         self.model, self.state, self.forces = model, state, forces
         self.x = state.x  # the kernel reads this field
-        self.garment, self.options = garment, options
+        self.garment, self.options, self.levels = garment, options, levels
+        if levels is not None and options.join != "merge":
+            raise ValueError(f"a garment run coarse to fine needs join = \"merge\" (the levels are merged ones), got "
+                             f"join = {options.join!r}")
         self.changes_topology = options.join == "merge"
         self.first = garment.first_seam_spring
         self.count = len(garment.seam_pairs)
@@ -99,6 +105,8 @@ class Sewing(Controller):
         self._start()
 
     def _start(self) -> None:
+        if self.levels is not None:
+            self.garment = self.levels.garment
         self.active = self.count > 0
         self.current_of = np.arange(self.garment.data.n_particles, dtype=np.int64)
         self.closed_at = None
@@ -124,6 +132,12 @@ class Sewing(Controller):
         data = self.garment.data
         return ModelChange(data=data, rest=True,
                            topology=self.model.data is not data)
+
+    def model_changed(self, change: ModelChange, t: float, dt: float) -> None:
+        """A level switch of a garment run coarse to fine: the seams and pieces of the new level."""
+        if self.levels is not None and change.level is not None and self.joined:
+            level = self.levels.levels[change.level]
+            self.garment, self.current_of = level.garment, level.current_of
 
     # ------------------------------------------------------------------ per step
     def before_step(self, t: float, dt: float) -> None:

@@ -1,0 +1,116 @@
+"""Does coarse-to-fine pay on a garment? The T-shirt on the mannequin from placement to rest, three ways:
+
+* finest:         the pieces meshed on 3 levels, placed, sewn and draped on the finest (2 cm) only
+                  ([multilevel] start_level = 3 of demos/scenes/sew_tshirt_multilevel.toml);
+* finest (noise): the same with the placed positions moved by 1e-7 m of noise: how far two runs that differ by
+                  round-off end apart (the spread the coarse-to-fine rest shape is judged against);
+* coarse-to-fine: placed and sewn on level 1 (4 cm), refined to level 2 and 3 as the drape settles (the scene as
+                  it is); and the same with the coarse levels stepping sqrt(2) times larger per level
+                  ([multilevel] dt_growth; the finest keeps the scene's step).
+
+"At rest" is the scene's rest criterion (taichi_cloth.rest, as `run --until-rest`; a run is busy until it reaches
+its finest level). For each: wall time from placement to rest (kernels loaded from Taichi's offline cache; run
+once beforehand to fill it), simulated time, particles at rest, the RMS symmetric surface distance of the rest
+shape to the finest run's (vertices of each to the other's surface, both ways), the largest difference of the
+garment quality table (area and boundary errors, max and mean strain, per piece) in percentage points, and the
+particles inside the body.
+
+    python benchmarks/multilevel_garment.py [--frames 1800]
+
+Writes out/bench/multilevel_garment.csv.
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import sys
+import time
+import tomllib
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+SCENE = ROOT / "demos" / "scenes" / "sew_tshirt_multilevel.toml"
+
+
+def run_to_rest(start_level: int, frames: int, noise: float = 0.0, dt_growth: float = 1.0):
+    """(figures dict, rest positions (P,3), triangles (T,3)) of the T-shirt run from start_level (1-based)."""
+    from taichi_cloth.garment.metrics import garment_quality
+    from taichi_cloth.scenefile import load_scene
+
+    cfg = tomllib.loads(SCENE.read_text())
+    cfg["multilevel"]["start_level"] = start_level
+    cfg["multilevel"]["dt_growth"] = dt_growth
+    cfg["frames"] = frames
+    loaded = load_scene(cfg, base_dir=SCENE.parent, out=ROOT / "out" / "bench")
+    scene = loaded.scene
+    if noise:
+        x = scene.positions()
+        scene.state.set(x=x + np.random.default_rng(1).normal(0.0, noise, x.shape))
+    t0 = time.perf_counter()
+    summary = scene.run(frames, progress=False, until_rest=True)
+    wall = time.perf_counter() - t0
+    q = garment_quality(scene)
+    refiner = scene.controller("refiner")
+    return dict(wall=wall, sim=scene.state.t, at_rest=summary.stopped_at_rest, rest=summary.rest,
+                particles=scene.model.data.n_particles,
+                levels=" ".join(f"{s.level + 1}@{s.t:.2f}s" for s in refiner.switches), quality=q,
+                inside=q.penetrations), scene.positions(), scene.model.data.triangles.copy()
+
+
+def surface_distance(xa, ta, xb, tb) -> float:
+    """RMS symmetric surface distance [m]: every vertex of A to B's surface and every vertex of B to A's (exact up
+    to 0.2 m, clipped beyond)."""
+    from collision.distance import unsigned_distance
+
+    d = np.concatenate([unsigned_distance(xa, xb[tb], 0.2), unsigned_distance(xb, xa[ta], 0.2)])
+    return float(np.sqrt(np.mean(d ** 2)))
+
+
+def quality_difference(qa, qb) -> float:
+    """Largest difference [percentage points] between two quality tables' per-piece errors and strains."""
+    keys = ("area_error", "boundary_error", "max_strain", "mean_strain")
+    return max(100 * abs(getattr(pa, k) - getattr(pb, k)) for pa, pb in zip(qa.pieces, qb.pieces) for k in keys)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--frames", type=int, default=1800, help="the most frames a run may take (60 a second)")
+    args = ap.parse_args(argv)
+    import taichi_cloth as tc
+
+    tc.init("cpu")
+    runs = [("finest", 3, 0.0, 1.0), ("finest (noise)", 3, 1e-7, 1.0), ("coarse-to-fine", 1, 0.0, 1.0),
+            ("coarse-to-fine, dt x sqrt(2) per level", 1, 0.0, 2 ** 0.5)]
+    results = {}
+    for name, start, noise, growth in runs:
+        results[name] = run_to_rest(start, args.frames, noise, growth)
+        r = results[name][0]
+        print(f"{name}: {r['wall']:.1f} s wall, {r['sim']:.2f} s simulated, at rest {r['at_rest']}, levels "
+              f"{r['levels']}; {r['rest']}", flush=True)
+    ref, xr, tr = results["finest"]
+    rows = []
+    print("| mode | wall time to rest [s] | simulated [s] | speed-up | particles at rest | RMS distance to finest "
+          "[mm] | quality table vs finest [pp] | inside the body | levels (entered at) |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for name, (r, x, t) in results.items():
+        dist = surface_distance(x, t, xr, tr)
+        dq = quality_difference(r["quality"], ref["quality"])
+        rows.append(dict(mode=name, wall_s=r["wall"], sim_s=r["sim"], at_rest=r["at_rest"], particles=r["particles"],
+                         rms_distance_mm=1e3 * dist, quality_pp=dq, inside=r["inside"], levels=r["levels"]))
+        print(f"| {name} | {r['wall']:.1f}{'' if r['at_rest'] else ' (not at rest)'} | {r['sim']:.2f} | "
+              f"{ref['wall'] / r['wall']:.2f}x | {r['particles']} | {1e3 * dist:.2f} | {dq:.2f} | {r['inside']} | "
+              f"{r['levels']} |")
+    out = ROOT / "out" / "bench"
+    out.mkdir(parents=True, exist_ok=True)
+    with open(out / "multilevel_garment.csv", "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    print(f"wrote {out / 'multilevel_garment.csv'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
