@@ -178,9 +178,10 @@ def _cmd_info(args) -> int:
         print(f"  {name:20s} {kind}")
         for opt_name, opt in cls.OPTIONS.items():
             print(f"      {opt_name} = {opt.default!r}: {opt.doc}")
-    print("materials (density kg/m^2, stretch N/m, shear N/m, bend N m, damping s):")
+    print("materials (density kg/m^2, stretch N/m, shear N/m, bend N m, damping s, viscosity m^2/s):")
     for name, m in MATERIALS.items():
-        print(f"  {name:8s} {m.density:6.3g} {m.stretch:8.4g} {m.shear:8.4g} {m.bend:8.2g} {m.damping:8.2g}")
+        print(f"  {name:8s} {m.density:6.3g} {m.stretch:8.4g} {m.shear:8.4g} {m.bend:8.2g} {m.damping:8.2g} "
+              f"{m.viscosity:8.2g}")
     return 0
 
 

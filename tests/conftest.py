@@ -51,8 +51,19 @@ def current_level(scene) -> int:
     return scene.controller("refiner").level
 
 
+def damping_matrix(d, x) -> np.ndarray:
+    """Dense (3P,3P) -df/dv of the springs of ClothData `d` at positions x: kd u u^T per spring and the viscous
+    c I per mesh edge (stiffness_matrix with the rest length = the current length keeps only the u u^T term, with
+    rest length 0 only the I term)."""
+    from taichi_cloth.stability import stiffness_matrix
+
+    length = np.linalg.norm(x[d.springs[:, 1]] - x[d.springs[:, 0]], axis=1)
+    return stiffness_matrix(x, d.springs, d.damping, length) \
+        + stiffness_matrix(x, d.springs, d.viscous_damping(), np.zeros(d.n_springs))
+
+
 def spring_forces(d, x, v):
-    """numpy spring forces with damping, (P,3)."""
+    """numpy spring forces with damping and the mesh edges' viscous dashpots, (P,3)."""
     a, b = d.springs[:, 0], d.springs[:, 1]
     diff = x[b] - x[a]
     length = np.linalg.norm(diff, axis=1)
@@ -61,4 +72,7 @@ def spring_forces(d, x, v):
     f = np.zeros_like(x)
     np.add.at(f, a, mag[:, None] * u)
     np.add.at(f, b, -mag[:, None] * u)
+    viscous = d.viscous_damping()[:, None] * (v[b] - v[a])
+    np.add.at(f, a, viscous)
+    np.add.at(f, b, -viscous)
     return f, u

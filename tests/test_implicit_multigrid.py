@@ -7,7 +7,7 @@ import pytest
 import taichi as ti
 
 import taichi_cloth as tc
-from conftest import current_level, spring_forces
+from conftest import current_level, damping_matrix, spring_forces
 from multilevel.aggregation import AggregationMultigrid
 from taichi_cloth.multilevel_cloth import multilevel_grid
 from taichi_cloth.stability import stiffness_matrix
@@ -40,10 +40,9 @@ def filtered_solve(sc) -> np.ndarray:
     d = sc.model.data
     x, v = sc.positions(), sc.velocities()
     f, _ = spring_forces(d, x, v)
-    length = np.linalg.norm(x[d.springs[:, 1]] - x[d.springs[:, 0]], axis=1)
     f += d.mass[:, None] * np.array([0.0, -9.81, 0.0]) - GAMMA * d.mass[:, None] * v
     K = stiffness_matrix(x, d.springs, d.stiffness, d.rest_length)
-    D = stiffness_matrix(x, d.springs, d.damping, length)  # rest = current length: only the kd u u^T term
+    D = damping_matrix(d, x)
     A = np.diag(np.repeat(d.mass, 3) * (1 + H * GAMMA)) + H * D + H * H * K
     rhs = H * f.reshape(-1) - H * H * K @ v.reshape(-1)
     normals = sc.state.contacts.normal.to_numpy()[: d.n_particles]
@@ -247,9 +246,8 @@ def test_an_aggregation_v_cycle_is_symmetric_and_positive_and_its_levels_are_gal
 
     # level 0 is A~ of the formulas
     d, x = sc.model.data, sc.positions()
-    length = np.linalg.norm(x[d.springs[:, 1]] - x[d.springs[:, 0]], axis=1)
     K = stiffness_matrix(x, d.springs, d.stiffness, d.rest_length)
-    D = stiffness_matrix(x, d.springs, d.damping, length)
+    D = damping_matrix(d, x)
     A = np.diag(np.repeat(d.mass, 3) * (1 + H * GAMMA)) + H * D + H * H * K
     normals = sc.state.contacts.normal.to_numpy()[:n]
     held = sc.model.pinned | (sc.state.contacts.stuck.to_numpy()[:n] != 0)

@@ -5,7 +5,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 import taichi_cloth as tc
-from conftest import spring_forces
+from conftest import damping_matrix, spring_forces
 from taichi_cloth.stability import stiffness_matrix
 
 
@@ -33,9 +33,7 @@ def test_implicit_first_newton_iteration_solves_the_baraff_witkin_system():
     f, u = spring_forces(d, x, v)
     f += d.mass[:, None] * np.array([0, -9.81, 0]) - gamma * d.mass[:, None] * v
     K = stiffness_matrix(x, d.springs, d.stiffness, d.rest_length)  # K = -df/dx
-    # damping Jacobian: -df/dv = sum_s kd u u^T on the Laplacian pattern
-    D = stiffness_matrix(x, d.springs, d.damping, np.zeros(d.n_springs) + np.linalg.norm(
-        x[d.springs[:, 1]] - x[d.springs[:, 0]], axis=1))  # rest = current length: only the u u^T term
+    D = damping_matrix(d, x)  # -df/dv: kd u u^T per spring, c I per mesh edge
     M = np.repeat(d.mass, 3) * (1 + h * gamma)
     A = np.diag(M) + h * D + h * h * K
     b = h * f.reshape(-1) - h * h * K @ v.reshape(-1)
