@@ -6,7 +6,10 @@
                   round-off end apart (the spread the coarse-to-fine rest shape is judged against);
 * coarse-to-fine: placed and sewn on level 1 (4 cm), refined to level 2 and 3 as the drape settles (the scene as
                   it is); and the same with the coarse levels stepping sqrt(2) times larger per level
-                  ([multilevel] dt_growth; the finest keeps the scene's step).
+                  ([multilevel] dt_growth; the finest keeps the scene's step);
+* local:          placed and sewn on level 1, then refined locally ([multilevel] refine = "local",
+                  taichi_cloth.garment.local): each switch gives the next level's vertices only to the triangles
+                  that fold (dihedral angle over [multilevel] angle) or touch the body.
 
 "At rest" is the scene's rest criterion (taichi_cloth.rest, as `run --until-rest`; a run is busy until it reaches
 its finest level). For each: wall time from placement to rest (kernels loaded from Taichi's offline cache; run
@@ -34,14 +37,16 @@ ROOT = Path(__file__).resolve().parents[1]
 SCENE = ROOT / "demos" / "scenes" / "sew_tshirt_multilevel.toml"
 
 
-def run_to_rest(start_level: int, frames: int, noise: float = 0.0, dt_growth: float = 1.0):
-    """(figures dict, rest positions (P,3), triangles (T,3)) of the T-shirt run from start_level (1-based)."""
+def run_to_rest(start_level: int, frames: int, noise: float = 0.0, dt_growth: float = 1.0, refine: str = "global"):
+    """(figures dict, rest positions (P,3), triangles (T,3)) of the T-shirt run from start_level (1-based), refined
+    `refine` ("global" or "local")."""
     from taichi_cloth.garment.metrics import garment_quality
     from taichi_cloth.scenefile import load_scene
 
     cfg = tomllib.loads(SCENE.read_text())
     cfg["multilevel"]["start_level"] = start_level
     cfg["multilevel"]["dt_growth"] = dt_growth
+    cfg["multilevel"]["refine"] = refine
     cfg["frames"] = frames
     loaded = load_scene(cfg, base_dir=SCENE.parent, out=ROOT / "out" / "bench")
     scene = loaded.scene
@@ -81,11 +86,13 @@ def main(argv=None) -> int:
     import taichi_cloth as tc
 
     tc.init("cpu")
-    runs = [("finest", 3, 0.0, 1.0), ("finest (noise)", 3, 1e-7, 1.0), ("coarse-to-fine", 1, 0.0, 1.0),
-            ("coarse-to-fine, dt x sqrt(2) per level", 1, 0.0, 2 ** 0.5)]
+    runs = [("finest", 3, 0.0, 1.0, "global"), ("finest (noise)", 3, 1e-7, 1.0, "global"),
+            ("coarse-to-fine", 1, 0.0, 1.0, "global"), ("coarse-to-fine, dt x sqrt(2) per level", 1, 0.0, 2 ** 0.5,
+                                                          "global"),
+            ("local", 1, 0.0, 1.0, "local")]
     results = {}
-    for name, start, noise, growth in runs:
-        results[name] = run_to_rest(start, args.frames, noise, growth)
+    for name, start, noise, growth, refine in runs:
+        results[name] = run_to_rest(start, args.frames, noise, growth, refine)
         r = results[name][0]
         print(f"{name}: {r['wall']:.1f} s wall, {r['sim']:.2f} s simulated, at rest {r['at_rest']}, levels "
               f"{r['levels']}; {r['rest']}", flush=True)

@@ -220,11 +220,15 @@ def _triangulate(mf: PieceMesh, on: np.ndarray):
     local[fine] = np.arange(len(fine))
     uv = mf.uv[fine]
     loop = mf.boundary_loop[on[mf.boundary_loop]]
-    tris = Delaunay(uv, qhull_options="Qbb Qc Qz Q12").simplices.astype(np.int64)
+    # a ring of points far outside: no vertex of the piece is on the hull, where collinear boundary samples
+    # (a straight outline) would give flat triangles
+    centre, size = 0.5 * (uv.min(axis=0) + uv.max(axis=0)), float(np.ptp(uv, axis=0).max())
+    ring = centre + 10 * size * np.stack([np.cos(np.arange(8) * np.pi / 4), np.sin(np.arange(8) * np.pi / 4)], 1)
+    tris = Delaunay(np.concatenate([uv, ring])).simplices.astype(np.int64)
+    tris = tris[np.all(tris < len(uv), axis=1)]
     tris = tris[_inside_polygon(uv[tris].mean(axis=1), uv[local[loop]])]
     area = _orient(uv, tris)
     tris[area < 0] = tris[area < 0][:, [0, 2, 1]]
-    tris = tris[np.abs(area) > 0]
     edges = {(min(a, b), max(a, b)) for t in tris for a, b in ((t[0], t[1]), (t[1], t[2]), (t[2], t[0]))}
     ll = local[loop]
     missing = [(int(loop[k]), int(loop[(k + 1) % len(loop)])) for k in range(len(loop))
