@@ -135,6 +135,12 @@ def test_scene_file_runs_a_garment_coarse_to_fine_and_names_bad_tables(tmp_path)
     refiner, sewing = sc.controller("refiner"), sc.controller("sewing")
     assert refiner.level == 0 and refiner.cloth.n_levels == 2 and sewing.levels is not None
     assert sc.model.data is sewing.garment.data is sewing.levels.levels[0].garment.data
+    local = load_scene(dict(scene, multilevel={"levels": 2, "start_level": 1, "refine": "local"}), out=tmp_path).scene
+    ml = local.controller("sewing").levels
+    t = ml.cloth.levels[-1].triangles
+    assert local.controller("refiner").local.mg is ml  # a garment refines locally its own way
+    edges = len(np.unique(np.sort(np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]]), axis=1), axis=0))
+    assert local.model.capacity == (ml.capacity[0], max(ml.capacity[1], 2 * edges), ml.capacity[2])
     with pytest.raises(SceneError, match=r"\[multilevel\] start_level: must be <= levels \(2\), got 3"):
         load_scene(dict(scene, multilevel={"levels": 2, "start_level": 3}), out=tmp_path)
     with pytest.raises(SceneError, match='coarse to fine needs join = "merge"'):

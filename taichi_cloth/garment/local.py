@@ -44,6 +44,7 @@ class LocalMesh:
     active:  (N,) bool over the finest level's merged particles: the ones this mesh has
     fine_of: (n,) int64 the finest merged particle of every merged particle of `level`
     piece_fine: per piece, (n_i,) int64 the finest piece vertex of every vertex of its mesh
+    (the pieces' PieceMesh keep the finest level's hierarchy and level number: a local mesh is no level of it)
     """
 
     level: GarmentLevel
@@ -117,9 +118,10 @@ class LocalGarmentRefinement:
         new = (depth > self.depth) & (self.born <= depth) & ~cur.active
         if not new.any():
             return None
-        active = cur.active | new
-        local = self._build(active)
+        local = self._build(cur.active | new)
         self.depth = depth
+        if np.array_equal(local.active, cur.active):  # every new vertex gave way to the outline
+            return None
         return local, self._prolongation(local)
 
     def accept(self, local: LocalMesh) -> None:
@@ -186,8 +188,8 @@ class LocalGarmentRefinement:
             t, w = _locate(mc.uv, mc.triangles, m.uv[first[rows] - g_new.offsets[i]])
             parents[rows] = cur.level.current_of[g_cur.offsets[i] + mc.triangles[t]]
             weights[rows] = w
-        uv = np.zeros((n, 2))
-        return Level(uv, new.level.merged.triangles, parents, weights, np.full((n, 4), -1, np.int64))
+        # no uv: a merged vertex's pattern point is in one piece only (the pieces' meshes hold them)
+        return Level(np.zeros((n, 2)), new.level.merged.triangles, parents, weights, np.full((n, 4), -1, np.int64))
 
 
 def _points_in_triangles(uv: np.ndarray, triangles: np.ndarray, points: np.ndarray, chunk: int = 256):
