@@ -147,7 +147,7 @@ def assemble(cloth, *, name: str = "cloth", integrator: str = DEFAULT_INTEGRATOR
     refiner = None
     if source.multilevel is not None:
         ready = (lambda: sew.joined) if sew is not None else None  # a garment refines once its seams are joined
-        refiner = _refiner(model, state, source.multilevel, multilevel, gravity, ready)
+        refiner = _refiner(model, state, source.multilevel, multilevel, gravity, ready, source.garment_levels)
         clock.model_changed(refiner.dt_scale(refiner.level))
     strain_map = None
     if source.garment is not None:
@@ -197,7 +197,8 @@ def _cloth_source(cloth, precision: str, multilevel, sewing) -> _Source:
 
     if isinstance(cloth, MultilevelGarment):  # the pieces apart on the start level, then the merged levels
         g = cloth.garment
-        model = Model(g.data, precision, capacity=cloth.capacity)
+        local = (multilevel or {}).get("refine") == "local"
+        model = Model(g.data, precision, capacity=cloth.local_capacity if local else cloth.capacity)
         fixed = [PinSpec(near=g.fixed_targets)] if len(g.fixed) else []
         return _Source(model, [g.data] + list(cloth.cloth.levels), fixed, multilevel=cloth.cloth, garment=g,
                        garment_levels=cloth)
@@ -278,14 +279,14 @@ def _sewing(model, state, forces, garment, options: dict | None, levels=None):
         raise SceneError(f"sewing: {err}") from None
 
 
-def _refiner(model, state, cloth, options: dict | None, gravity, ready=None):
+def _refiner(model, state, cloth, options: dict | None, gravity, ready=None, garment=None):
     from .refiner import Refiner, SettleCriterion
 
     opts = dict(options or {})
     refine, dt_growth, angle = opts.pop("refine", True), opts.pop("dt_growth", 1.0), opts.pop("angle", 20.0)
     try:
         return Refiner(model, state, state.contacts, cloth, SettleCriterion(**opts), refine, dt_growth, angle, gravity,
-                       ready)
+                       ready, garment)
     except (TypeError, ValueError) as err:
         raise SceneError(f"multilevel: {err}") from None
 

@@ -52,6 +52,8 @@ class ModelChange:
     prolong:   or a callable prolong(state, n_before) that fills the state in place after the refill (a level
                switch: the new vertices from their parents); n_before is the particle count before it
     level:     the 4-8 level now simulated (0-based), for integrators that keep per-level data
+    garment:   a garment's locally refined level (taichi_cloth.garment.levels.GarmentLevel) when `data` is one
+               (the sewing follows it instead of the hierarchy's level)
     dt_scale:  the step on this model as a multiple of the scene's base step (coarse levels may step larger)
     topology:  the triangles changed: the recorder logs them again
     event:     a line for the run summary and the recording (what happened)
@@ -64,6 +66,7 @@ class ModelChange:
     rest: bool = False
     prolong: Callable | None = None
     level: int | None = None
+    garment: object = None
     dt_scale: float | None = None
     topology: bool = False
     event: str | None = None

@@ -9,7 +9,9 @@ follow. Nothing is recompiled. Built only when the scene's cloth is a Multilevel
 Refinement is global (every triangle bisected: the next level of the hierarchy) or local: only the
 triangles whose dihedral angle across the hypotenuse exceeds `angle` degrees, or that touch a collider,
 are bisected (with the 4-8 forced splits that keep the mesh conforming, multilevel.hierarchy.refine_local),
-never deeper than the hierarchy's finest level, so the fields' capacity still holds.
+never deeper than the hierarchy's finest level, so the fields' capacity still holds. A garment (its merged
+outline levels are not bisections of each other) refines locally by taichi_cloth.garment.local: the marked
+triangles get the next level's vertices, the pieces are re-triangulated on them and merged again.
 """
 from __future__ import annotations
 
@@ -64,7 +66,8 @@ class Refiner(Controller):
     model, state: the scene's; contacts: its Contacts (or None: no colliders); cloth: the MultilevelCloth;
     gravity: (3,) [m/s^2] for the energy scale of the settle criterion; ready: a callable that says when the level
     schedule may begin (a garment: once its seams are joined; None: at once). Until then no frame counts toward
-    the settle criterion, and a reset leaves the model to the controller it waits for.
+    the settle criterion, and a reset leaves the model to the controller it waits for. garment: the
+    MultilevelGarment whose merged levels `cloth` holds (local refinement needs it).
     level:    the current level (0-based; the first paper's N = level + 1)
     switches: the LevelSwitch history (the start level first)
     settled:  whether the settle criterion held at the last observed frame
@@ -75,7 +78,7 @@ class Refiner(Controller):
 
     def __init__(self, model, state, contacts, cloth, settle: SettleCriterion | None = None,
                  refine: bool | str = True, dt_growth: float = 1.0, angle: float = 20.0, gravity=(0.0, -9.81, 0.0),
-                 ready: Callable[[], bool] | None = None):
+                 ready: Callable[[], bool] | None = None, garment=None):
         from multilevel.prolong import Prolongation
 
         self.model, self.state, self.contacts, self.cloth = model, state, contacts, cloth
@@ -85,7 +88,12 @@ class Refiner(Controller):
         if mode not in ("global", "local", "none"):
             raise ValueError(f"multilevel refine must be 'global', 'local' or 'none', got {refine!r}")
         self.mode = mode
-        if mode == "local" and getattr(cloth.hierarchy.levels[0], "regular", None) is not None:
+        self.local = None
+        if mode == "local" and garment is not None:
+            from .garment.local import LocalGarmentRefinement
+
+            self.local = LocalGarmentRefinement(garment)
+        elif mode == "local" and getattr(cloth.hierarchy.levels[0], "regular", None) is not None:
             raise ValueError("local refinement needs a 4-8 hierarchy of a rectangle (an outline's boundary band "
                              "is re-triangulated per level, not bisected)")
         self.refine_enabled = mode != "none"
@@ -111,6 +119,8 @@ class Refiner(Controller):
     def _restart(self) -> None:
         self.level = self.cloth.start_level
         self.mesh = self.cloth.hierarchy.levels[self.level]  # the current Level (uv, triangles)
+        if self.local is not None:
+            self.local.reset()
         self.depth = np.full(self.mesh.n_triangles, self.level, np.int64)
         self._exhausted = False
         self._energies: list[float] = []
@@ -172,7 +182,18 @@ class Refiner(Controller):
             raise ValueError("the cloth is already at its finest level")
         n_old = self.model.data.n_particles
         old = self.model.data
-        if self.mode == "local":
+        garment = None
+        if self.local is not None:
+            step = self.local.refine(self.marked())
+            fits = step is not None and all(
+                n <= c for n, c in zip(_size(step[0].level.merged), self.model.capacity))
+            if not fits:  # nothing left to refine (or, never seen, more than the finest level's fields hold)
+                self._exhausted = True
+                return None
+            local, mesh = step
+            self.local.accept(local)
+            data, garment = local.level.merged, local.level
+        elif self.mode == "local":
             from multilevel.hierarchy import refine_local
 
             mesh, depth = refine_local(self.mesh.uv, self.mesh.triangles, self.marked(), self.depth,
@@ -193,7 +214,7 @@ class Refiner(Controller):
         self.settled = False
         self.switches.append(LevelSwitch(self.level, t, self._steps))
 
-        lossy = self.mode == "global" and self.lossy[self.level]
+        lossy = (self.mode == "global" and self.lossy[self.level]) or garment is not None
         momentum = (old.mass[:, None] * self.state.velocities()).sum(0) if lossy else None
 
         def prolong(state, n_before):
@@ -202,9 +223,10 @@ class Refiner(Controller):
                 v = state.velocities()
                 state.set(v=v + (momentum - (data.mass[:, None] * v).sum(0)) / data.mass.sum())
 
-        return ModelChange(data=data, prolong=prolong, level=self.level, dt_scale=self.dt_scale(self.level),
-                           topology=True, event=f"level {self.level + 1} at t = {t:.3f} s: {data.n_particles} "
-                                                f"particles, {data.n_springs} springs")
+        return ModelChange(data=data, prolong=prolong, level=self.level, garment=garment,
+                           dt_scale=self.dt_scale(self.level), topology=True,
+                           event=f"level {self.level + 1} at t = {t:.3f} s: {data.n_particles} particles, "
+                                 f"{data.n_springs} springs")
 
     def record(self, frame) -> None:
         frame.scalars["level"] = self.level + 1
@@ -214,9 +236,14 @@ class Refiner(Controller):
 
     def marked(self) -> np.ndarray:
         """(t,) bool: the current triangles that call for refinement: a dihedral angle across the hypotenuse
-        above `angle` degrees (curvature), or a vertex in contact with a collider in the last step."""
-        tri = self.mesh.triangles
+        above `angle` degrees (curvature), or a vertex in contact with a collider in the last step. A garment
+        refined locally: the dihedral angle across any edge (its triangles have no hypotenuse)."""
         x = self.state.positions()
+        if self.local is not None:
+            from .garment.local import fold_marks
+
+            return fold_marks(x, self.model.data.triangles, self.angle) | self._touching(self.model.data.triangles, x)
+        tri = self.mesh.triangles
         n = np.cross(x[tri[:, 1]] - x[tri[:, 0]], x[tri[:, 2]] - x[tri[:, 0]])
         n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
         key = np.sort(tri[:, :2], axis=1)
@@ -230,11 +257,18 @@ class Refiner(Controller):
         a, b = order[first[two]], order[first[two] + 1]
         bent = np.degrees(np.arccos(np.clip((n[a] * n[b]).sum(axis=1), -1.0, 1.0))) > self.angle
         marked[a[bent]] = marked[b[bent]] = True
-        contacts = self.contacts
-        if contacts is not None:
-            touching = np.linalg.norm(contacts.normal.to_numpy()[: len(x)], axis=1) > 0
-            marked |= touching[tri].any(axis=1)
-        return marked
+        return marked | self._touching(tri, x)
+
+    def _touching(self, tri: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """(t,) bool: the triangles with a vertex in contact with a collider in the last step."""
+        if self.contacts is None:
+            return np.zeros(len(tri), bool)
+        touching = np.linalg.norm(self.contacts.normal.to_numpy()[: len(x)], axis=1) > 0
+        return touching[tri].any(axis=1)
+
+
+def _size(data) -> tuple[int, int, int]:
+    return data.n_particles, data.n_springs, len(data.triangles)
 
 
 def _keeps_momentum(level, coarse_mass: np.ndarray, fine_mass: np.ndarray) -> bool:

@@ -52,7 +52,8 @@ and a component whose table is absent is never built. The schema (units in brack
     start_level = 1               # the level the run starts on (levels: only the finest); a garment is placed, sewn
                                   # and merged on it, then refined once its seams are joined
     refine = "global"             # "global" (every triangle), "local" (where the dihedral angle across a
-                                  # hypotenuse exceeds `angle` = 20 [deg] or a collider touches), "none"
+                                  # hypotenuse, on a garment any edge, exceeds `angle` = 20 [deg] or a collider
+                                  # touches), "none"
     dt_growth = 1.0               # dt multiplier per level below the finest ([integrator] dt is the finest's)
     [multilevel.settle]           # a level is settled when all hold: max_speed [m/s] = 0.05, energy_change = 1e-4
                                   # (|dE| over `window` = 10 frames / (weight x cloth size)); max_time [s] = 3.0

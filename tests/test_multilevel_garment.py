@@ -135,6 +135,12 @@ def test_scene_file_runs_a_garment_coarse_to_fine_and_names_bad_tables(tmp_path)
     refiner, sewing = sc.controller("refiner"), sc.controller("sewing")
     assert refiner.level == 0 and refiner.cloth.n_levels == 2 and sewing.levels is not None
     assert sc.model.data is sewing.garment.data is sewing.levels.levels[0].garment.data
+    local = load_scene(dict(scene, multilevel={"levels": 2, "start_level": 1, "refine": "local"}), out=tmp_path).scene
+    ml = local.controller("sewing").levels
+    t = ml.cloth.levels[-1].triangles
+    assert local.controller("refiner").local.mg is ml  # a garment refines locally its own way
+    edges = len(np.unique(np.sort(np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]]), axis=1), axis=0))
+    assert local.model.capacity == (ml.capacity[0], max(ml.capacity[1], 2 * edges), ml.capacity[2])
     with pytest.raises(SceneError, match=r"\[multilevel\] start_level: must be <= levels \(2\), got 3"):
         load_scene(dict(scene, multilevel={"levels": 2, "start_level": 3}), out=tmp_path)
     with pytest.raises(SceneError, match='coarse to fine needs join = "merge"'):
@@ -161,3 +167,77 @@ def test_recording_and_self_collision_follow_the_switches(tmp_path):
     # the run ends on level 3 with self-collision on (it was given every level's mesh), nothing inside the sphere
     assert scene.model.n_particles[None] == mg.cloth.levels[2].n_particles
     assert np.linalg.norm(scene.positions(), axis=1).min() >= 0.2
+
+
+def hanging_on_edges(uv, triangles):
+    """Vertices lying strictly inside an edge of the 2D mesh (uv (n, 2), triangles (t, 3)): a non-conforming mesh
+    has them (a refined side meets an unrefined one)."""
+    from clothbase.meshes import edges_of
+
+    edges = edges_of(triangles)[0]
+    p, q = uv[edges[:, 0]][:, None], uv[edges[:, 1]][:, None]
+    d, r = q - p, uv[None] - p
+    length2 = (d ** 2).sum(2)
+    t = (r * d).sum(2) / length2
+    cross = d[..., 0] * r[..., 1] - d[..., 1] * r[..., 0]
+    on = (np.abs(cross) <= 1e-9 * length2) & (t > 1e-9) & (t < 1 - 1e-9)
+    return np.unique(np.nonzero(on)[1])
+
+
+def test_local_refinement_refines_where_it_touches_and_stays_conforming_across_seams():
+    """refine = "local" on the two squares over a smaller sphere (their outer parts hang free): two local steps
+    (toward levels 2 and 3) where the cloth folds by more than 45 degrees or touches, at least a fifth fewer
+    particles than level 3, every piece's mesh conforming (no vertex inside an edge, every edge on at most two
+    triangles, the piece covered, no sliver), the seams closed, mass and momentum kept by every switch, nothing
+    inside the sphere, no compile on the second switch."""
+    from multilevel.hierarchy import edge_use, signed_areas
+
+    mg = multilevel_garment(two_squares(), start_level=0)
+    scene = tc.Scene(mg, integrator="implicit", dt=1 / 120, precision="f64", colliders=[dict(SPHERE, radius=0.12)],
+                     stretch_limit=dict(max_strain=0.1), multilevel=dict(max_time=0.25, refine="local", angle=45.0))
+    refiner, sewing = scene.controller("refiner"), scene.controller("sewing")
+    probe = SwitchProbe(scene)
+    scene.add_controller(probe)
+    before, refine = [], refiner.refine
+
+    def spy():
+        before.append((scene.positions(), scene.velocities(), scene.model.data))
+        return refine()
+
+    refiner.refine = spy
+    frames = 0
+    while len(refiner.switches) < 2 and frames < 120:
+        scene.run(1, progress=False)
+        frames += 1
+    with tc.CompileCounter() as cc:
+        summary = scene.run(40, progress=False)
+    assert cc.total == 0, cc.compiled
+    assert [s.level for s in refiner.switches] == [0, 1, 2] and refiner.at_finest
+    assert sum("level 3 at t" in e for e in summary.events) == 1
+    finest = mg.cloth.levels[-1].n_particles
+    sizes = [d.n_particles for _, _, _, d, _, _ in probe.after]
+    assert mg.cloth.levels[0].n_particles < sizes[0] < sizes[1] < 0.8 * finest
+    for (x0, v0, d0), (level, x1, v1, d1, current_of, gaps) in zip(before, probe.after):
+        assert d1.mass.sum() == pytest.approx(d0.mass.sum(), rel=1e-13)
+        p0, p1 = (d0.mass[:, None] * v0).sum(0), (d1.mass[:, None] * v1).sum(0)
+        assert np.abs(p1 - p0).max() <= 1e-12 * max(np.abs(p0).max(), 1e-9), (p0, p1)
+        assert gaps.max() == 0.0  # the sewing measures the new mesh's pairs: the seams stay closed
+        assert len(np.unique(current_of)) == d1.n_particles
+    g = sewing.garment
+    assert g is refiner.local.current.level.garment
+    # the seams: every pair is one particle, and the two sides have the same samples
+    pairs = sewing.current_of[g.seam_pairs]
+    assert np.array_equal(pairs[:, 0], pairs[:, 1]) and len(g.seam_pairs) > 6
+    # conforming: one mesh (every edge on one or two triangles), no hanging vertex in any piece, pieces covered
+    tris = scene.model.data.triangles
+    assert edge_use(tris)[1].max() == 2
+    for m in g.meshes:
+        assert len(hanging_on_edges(m.uv, m.triangles)) == 0
+        assert signed_areas(m.uv, m.triangles).min() > 0 and m.quality.slivers == 0
+        loop = m.uv[m.boundary_loop]
+        outline = 0.5 * np.sum(loop[:, 0] * np.roll(loop[:, 1], -1) - np.roll(loop[:, 0], -1) * loop[:, 1])
+        assert signed_areas(m.uv, m.triangles).sum() == pytest.approx(outline, rel=1e-12)
+        assert np.array_equal(np.unique(m.triangles), np.arange(m.n_vertices))
+    x = scene.positions()
+    assert np.linalg.norm(x, axis=1).min() >= 0.12
+    assert sewing.gaps().max() == 0.0 and scene.check().max_strain < 0.12

@@ -192,6 +192,40 @@ def build_garment_levels(spec: GarmentSpec, body: Body | None = None, seam_stiff
     meshed once as hierarchies, so the levels share their outlines and their seam counts (a seam pairs its sides
     on every level). Every level carries the finest level's total mass (the outlines are resampled per level, so
     their areas differ slightly), so that a level switch keeps the mass."""
+    plan = plan_garment_levels(spec, body, seam_stiffness)
+    wanted = range(spec.levels) if levels is None else levels
+    return [plan.assemble([level_mesh(m, k) for m in plan.finest]) for k in wanted]
+
+
+@dataclass
+class GarmentLevelPlan:
+    """What every level of a garment is assembled from (build_garment_levels; a local refinement assembles its own
+    piece meshes the same way: taichi_cloth.garment.local).
+
+    finest:     PieceMesh per piece on the finest level (their hierarchies hold the other levels)
+    total_mass: [kg] what the finest level's triangles weigh; every assembled cloth is rescaled to it
+    """
+
+    spec: GarmentSpec
+    finest: list
+    routes: dict
+    material: Material
+    body: Body | None
+    seam_stiffness: float
+    total_mass: float
+
+    def assemble(self, meshes: list) -> GarmentCloth:
+        """The GarmentCloth of one mesh per piece (in spec.pieces order; seam sides with equal counts), its mass
+        rescaled to total_mass."""
+        g = _assemble(self.spec, meshes, self.routes, self.material, self.body, self.seam_stiffness)
+        if any(m is not f for m, f in zip(meshes, self.finest)):
+            g.data.mass *= self.total_mass / g.data.mass.sum()
+        return g
+
+
+def plan_garment_levels(spec: GarmentSpec, body: Body | None = None,
+                        seam_stiffness: float | None = None) -> GarmentLevelPlan:
+    """Mesh the pieces of `spec` as hierarchies and plan their seams (see build_garment_levels)."""
     spec.validate()
     mat = as_material(spec.material)
     needs_body = any(not isinstance(p, FreePlacement) for p in spec.placements.values()) or any(
@@ -207,15 +241,8 @@ def build_garment_levels(spec: GarmentSpec, body: Body | None = None, seam_stiff
     k_s = mat.sheet_modulus / 2 if seam_stiffness is None else float(seam_stiffness)
     if not k_s > 0:
         raise PatternError(f"garment {spec.name!r}: seam stiffness must be > 0 N/m, got {seam_stiffness!r}")
-    wanted = range(spec.levels) if levels is None else levels
-    out = []
-    total = mat.density * sum(m.area for m in finest)  # [kg] what the finest level's triangles weigh
-    for k in wanted:
-        g = _assemble(spec, [level_mesh(m, k) for m in finest], routes, mat, body, k_s)
-        if k != spec.levels - 1:
-            g.data.mass *= total / g.data.mass.sum()
-        out.append(g)
-    return out
+    total = mat.density * sum(m.area for m in finest)
+    return GarmentLevelPlan(spec, finest, routes, mat, body, k_s, total)
 
 
 def _assemble(spec: GarmentSpec, meshes: list, routes: dict, mat: Material, body, k_s: float) -> GarmentCloth:

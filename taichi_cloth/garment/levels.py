@@ -20,12 +20,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from clothbase.meshes import edges_of
 from multilevel.hierarchy import Hierarchy48, Level, identity_tables
 
 from ..cloth import ClothData
 from ..errors import PatternError
 from ..multilevel_cloth import MultilevelCloth
-from .garment import GarmentCloth, GarmentSpec, build_garment_levels
+from .garment import GarmentCloth, GarmentLevelPlan, GarmentSpec, plan_garment_levels
+from .mesh import level_mesh
 from .placement import Body
 from .sewing import merge_seams
 
@@ -51,11 +53,13 @@ class MultilevelGarment:
     levels:      GarmentLevel per level (levels[0] the coarsest)
     cloth:       MultilevelCloth of the merged levels (its hierarchy: their prolongation tables)
     start_level: the level (0-based) the pieces are placed and sewn on
+    plan:        the GarmentLevelPlan the levels were assembled from (a local refinement assembles more)
     """
 
     levels: list
     cloth: MultilevelCloth
     start_level: int
+    plan: GarmentLevelPlan | None = None
 
     @property
     def spec(self) -> GarmentSpec:
@@ -77,6 +81,16 @@ class MultilevelGarment:
         d = self.garment.data
         return tuple(max(a, b) for a, b in zip((d.n_particles, d.n_springs, len(d.triangles)), self.cloth.capacity))
 
+    @property
+    def local_capacity(self) -> tuple[int, int, int]:
+        """The capacity for local refinement (taichi_cloth.garment.local): a locally refined mesh has at most the
+        finest level's particles and triangles, so at most its edges (the same surface: Euler), but its Delaunay
+        triangles may give more bend springs than the finest level's: one structural and at most one bend spring
+        per edge."""
+        edges = len(edges_of(self.cloth.levels[-1].triangles)[0])
+        p, s, t = self.capacity
+        return p, max(s, 2 * edges), t
+
 
 def multilevel_garment(spec: GarmentSpec, body: Body | None = None, seam_stiffness: float | None = None,
                        start_level: int = 0) -> MultilevelGarment:
@@ -88,7 +102,8 @@ def multilevel_garment(spec: GarmentSpec, body: Body | None = None, seam_stiffne
                            f"{spec.levels}")
     if not 0 <= start_level < spec.levels:
         raise PatternError(f"garment {spec.name!r}: start level {start_level + 1} must lie in 1..{spec.levels}")
-    garments = build_garment_levels(spec, body, seam_stiffness)
+    plan = plan_garment_levels(spec, body, seam_stiffness)
+    garments = [plan.assemble([level_mesh(m, k) for m in plan.finest]) for k in range(spec.levels)]
     levels, tables = [], []
     for k, g in enumerate(garments):
         zero = np.zeros_like(g.data.positions)
@@ -96,7 +111,7 @@ def multilevel_garment(spec: GarmentSpec, body: Body | None = None, seam_stiffne
         levels.append(GarmentLevel(g, merged, current_of))
         tables.append(_merged_level(g, merged, current_of, levels[k - 1] if k else None))
     cloth = MultilevelCloth(Hierarchy48(tables), [lev.merged for lev in levels], start_level, garments[-1].material)
-    return MultilevelGarment(levels, cloth, start_level)
+    return MultilevelGarment(levels, cloth, start_level, plan)
 
 
 def _merged_level(g: GarmentCloth, merged: ClothData, current_of: np.ndarray, coarser: GarmentLevel | None) -> Level:

@@ -136,7 +136,7 @@ class Sewing(Controller):
     def model_changed(self, change: ModelChange, t: float, dt: float) -> None:
         """A level switch of a garment run coarse to fine: the seams and pieces of the new level."""
         if self.levels is not None and change.level is not None and self.joined:
-            level = self.levels.levels[change.level]
+            level = change.garment if change.garment is not None else self.levels.levels[change.level]
             self.garment, self.current_of = level.garment, level.current_of
 
     # ------------------------------------------------------------------ per step
