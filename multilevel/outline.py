@@ -317,7 +317,7 @@ def _point_segment_distance(p, a, b):
     return np.linalg.norm(p - (a + t[:, None] * ab), axis=1)
 
 
-def _inside_polygon(points: np.ndarray, P: np.ndarray) -> np.ndarray:
+def inside_polygon(points: np.ndarray, P: np.ndarray) -> np.ndarray:
     """(k,) bool: crossing-number point-in-polygon test of points (k, 2) against the closed polygon P."""
     A, B = P, np.roll(P, -1, axis=0)
     inside = np.zeros(len(points), bool)
@@ -536,7 +536,7 @@ class _Builder:
         weights[m + np.flatnonzero(same), 0] = 1.0
         todo = m + np.flatnonzero(~same)
         if len(todo):
-            tri, bary = _locate(prev.uv, prev.triangles, uv[todo])
+            tri, bary = locate(prev.uv, prev.triangles, uv[todo])
             vid = prev.triangles[tri]
             bary[np.abs(bary) < 1e-13] = 0.0
             bary /= bary.sum(axis=1, keepdims=True)
@@ -679,7 +679,7 @@ def _triangulate_band(uv, outer, kept_loops, span):
     for hole in band_holes:
         best = None
         for i, o in enumerate(band_outer):
-            if _inside_polygon(uv[hole[:1]], uv[o])[0] and (best is None or areas[i] < areas[best]):
+            if inside_polygon(uv[hole[:1]], uv[o])[0] and (best is None or areas[i] < areas[best]):
                 best = i
         if best is None:
             raise RuntimeError("internal error: a kept component lies outside the boundary polygon")
@@ -763,9 +763,9 @@ def _bridge_ok(uv, o, h, edges, allv, loops, eps):
                                                       np.broadcast_to(q, (len(others), 2))) <= eps):
         return False
     mid = 0.5 * (p + q)[None]
-    if not _inside_polygon(mid, uv[loops[0]])[0]:
+    if not inside_polygon(mid, uv[loops[0]])[0]:
         return False
-    return not any(_inside_polygon(mid, uv[lp])[0] for lp in loops[1:])
+    return not any(inside_polygon(mid, uv[lp])[0] for lp in loops[1:])
 
 
 def _earclip(uv, ring, eps):
@@ -928,7 +928,7 @@ def _lawson(uv, tris, constrained):
 
 
 # ---------------------------------------------------------------------- point location
-def _locate(uv, tris, pts):
+def locate(uv, tris, pts):
     """For each point (k, 2): the triangle of (uv, tris) that contains it, or else the nearest one, and the
     barycentric weights (k, 3) of the point (or of its closest point on that triangle); all >= 0, sum 1."""
     A, B, C = uv[tris[:, 0]], uv[tris[:, 1]], uv[tris[:, 2]]

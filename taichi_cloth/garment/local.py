@@ -29,7 +29,7 @@ import numpy as np
 from scipy.spatial import Delaunay
 
 from multilevel.hierarchy import Level
-from multilevel.outline import _inside_polygon, _locate
+from multilevel.outline import inside_polygon, locate
 
 from .levels import GarmentLevel, MultilevelGarment
 from .mesh import PieceMesh, mesh_quality
@@ -185,7 +185,7 @@ class LocalGarmentRefinement:
             if not len(rows):
                 continue
             mc = g_cur.meshes[i]
-            t, w = _locate(mc.uv, mc.triangles, m.uv[first[rows] - g_new.offsets[i]])
+            t, w = locate(mc.uv, mc.triangles, m.uv[first[rows] - g_new.offsets[i]])
             parents[rows] = cur.level.current_of[g_cur.offsets[i] + mc.triangles[t]]
             weights[rows] = w
         # no uv: a merged vertex's pattern point is in one piece only (the pieces' meshes hold them)
@@ -228,7 +228,7 @@ def _triangulate(mf: PieceMesh, on: np.ndarray):
     ring = centre + 10 * size * np.stack([np.cos(np.arange(8) * np.pi / 4), np.sin(np.arange(8) * np.pi / 4)], 1)
     tris = Delaunay(np.concatenate([uv, ring])).simplices.astype(np.int64)
     tris = tris[np.all(tris < len(uv), axis=1)]
-    tris = tris[_inside_polygon(uv[tris].mean(axis=1), uv[local[loop]])]
+    tris = tris[inside_polygon(uv[tris].mean(axis=1), uv[local[loop]])]
     area = _orient(uv, tris)
     tris[area < 0] = tris[area < 0][:, [0, 2, 1]]
     edges = {(min(a, b), max(a, b)) for t in tris for a, b in ((t[0], t[1]), (t[1], t[2]), (t[2], t[0]))}
