@@ -112,3 +112,18 @@ def test_a_feature_is_a_controller_added_without_touching_the_loop():
     sc.run(1, progress=False)
     np.testing.assert_allclose(sc.velocities(), v * (1 - 0.1 / 120) ** 2, rtol=1e-3, atol=1e-5)
     assert np.abs(v[:, 1]).min() > 0.3  # it was falling (1/20 s of gravity)
+
+
+def test_the_kernels_a_process_compiled_are_in_the_offline_cache_after_it_exits(tmp_path):
+    """Taichi writes its offline cache only when its runtime is finalised; `tc.init` does that at exit, so the
+    next run loads a scene's kernels instead of compiling them (12-13 s against 3 s for the 4-8 T-shirt)."""
+    import subprocess
+    import sys
+
+    cache = tmp_path / "ticache"
+    script = ("import taichi_cloth as tc\n"
+              f"tc.init('cpu', offline_cache_file_path={str(cache)!r})\n"
+              "cloth = tc.ClothBuilder.grid(size=(0.2, 0.2), resolution=(4, 4), material='cotton', plane='xz')\n"
+              "tc.Scene(cloth, integrator='explicit', dt=1e-3).step(1)\n")
+    subprocess.run([sys.executable, "-c", script], check=True, capture_output=True, timeout=300)
+    assert list(cache.rglob("*.tic")), sorted(p.name for p in cache.rglob("*"))
