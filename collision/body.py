@@ -327,7 +327,7 @@ class MeshCollider(ParticleCollider):
     @ti.kernel
     def _signed_distance(self, pts: ti.types.ndarray(dtype=ti.math.vec3, ndim=1),
                          out: ti.types.ndarray(dtype=ti.f64, ndim=1)):
-        ti.loop_config(serialize=self.serial)
+        # parallel whatever the cloth's size: each point is a pass over every triangle of the body
         for k in range(pts.shape[0]):
             p = ti.cast(pts[k], ti.f64)
             best = ti.cast(1e30, ti.f64)
