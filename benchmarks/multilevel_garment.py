@@ -19,7 +19,7 @@ the rest shape to the finest run's and to the coarse-to-fine run's (vertices of 
 both ways), the largest difference of the garment quality table (area and boundary errors, max and mean strain,
 per piece) in percentage points and which entry it is, the same without the max strain (one edge's), and the
 particles inside the body. The wall times include the run's closing check (exact distances of every particle
-to the body's 26,756 triangles, for the summary's "no particle inside" line: about 1 s).
+to the body's 26,756 triangles, for the summary's "no particle inside" line: about 0.7 s).
 
     python benchmarks/multilevel_garment.py [--frames 1800]
 
