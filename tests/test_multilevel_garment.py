@@ -241,3 +241,27 @@ def test_local_refinement_refines_where_it_touches_and_stays_conforming_across_s
     x = scene.positions()
     assert np.linalg.norm(x, axis=1).min() >= 0.12
     assert sewing.gaps().max() == 0.0 and scene.check().max_strain < 0.12
+
+
+def test_a_pin_holds_its_corner_through_the_merge_and_every_switch():
+    """A's outer corner pinned where it was placed (`near`, selected again at the merge and at every switch): the
+    pinned particle is that corner on every level, it stays exactly there, and the garment hangs from it."""
+    corner = (-0.25, 0.3, -0.1)  # A's bottom-left corner as placed (its pattern origin)
+    mg = multilevel_garment(two_squares(), start_level=0)
+    scene = tc.Scene(mg, integrator="implicit", dt=1 / 120, precision="f64", pins=[{"near": [corner]}],
+                     multilevel=dict(max_time=0.25))
+    refiner, pins = scene.controller("refiner"), scene.controller("pins")
+    held = []
+    frames = 0
+    while not refiner.at_finest and frames < 150:
+        scene.run(1, progress=False)
+        frames += 1
+        x = scene.positions()
+        held.append((len(refiner.switches), len(pins.indices), np.abs(x[pins.indices] - corner).max()))
+    assert [s.level for s in refiner.switches] == [0, 1, 2] and scene.controller("sewing").joined
+    assert {n for _, n, _ in held} == {1} and max(d for _, _, d in held) < 1e-12, held
+    assert {k for k, _, _ in held} == {1, 2, 3}  # measured on every level
+    scene.run(30, progress=False)
+    x = scene.positions()
+    assert np.abs(x[pins.indices] - corner).max() < 1e-12
+    assert x[:, 1].min() < corner[1] - 0.15  # the rest hangs from it (no floor, no body)
