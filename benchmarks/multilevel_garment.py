@@ -9,7 +9,11 @@
                   ([multilevel] dt_growth; the finest keeps the scene's step);
 * local:          placed and sewn on level 1, then refined locally ([multilevel] refine = "local",
                   taichi_cloth.garment.local): each switch gives the next level's vertices only to the triangles
-                  that fold (dihedral angle over [multilevel] angle) or touch the body.
+                  that fold (dihedral angle over [multilevel] angle) or touch the body;
+* 5 levels:       (with --modes) the same finest mesh meshed on 5 levels, sewn on level 3 (4 cm) and refined to
+                  level 5, with CG preconditioned by Jacobi ("5 levels, jacobi") or by V-cycles over the garment's
+                  own levels ("5 levels, multigrid": on 3 levels the coarsest, 358 particles, is too large for
+                  the cycle's dense coarse solve; on 5 it has 97).
 
 "At rest" is the scene's rest criterion (taichi_cloth.rest, as `run --until-rest`; a run is busy until it reaches
 its finest level). For each: wall time from placement to rest (kernels loaded from Taichi's offline cache; run
@@ -21,7 +25,7 @@ per piece) in percentage points and which entry it is, the same without the max 
 particles inside the body. The wall times include the run's closing check (exact distances of every particle
 to the body's 26,756 triangles, for the summary's "no particle inside" line: about 0.7 s).
 
-    python benchmarks/multilevel_garment.py [--frames 1800]
+    python benchmarks/multilevel_garment.py [--frames 1800] [--arch cpu|gpu] [--modes NAME ...]
 
 Writes out/bench/multilevel_garment.csv.
 """
@@ -40,16 +44,32 @@ ROOT = Path(__file__).resolve().parents[1]
 SCENE = ROOT / "demos" / "scenes" / "sew_tshirt_multilevel.toml"
 
 
-def run_to_rest(start_level: int, frames: int, noise: float = 0.0, dt_growth: float = 1.0, refine: str = "global"):
-    """(figures dict, rest positions (P,3), triangles (T,3)) of the T-shirt run from start_level (1-based), refined
-    `refine` ("global" or "local")."""
+#: the runs: run_to_rest's arguments by name
+RUNS = {
+    "finest": dict(start_level=3),
+    "finest (noise)": dict(start_level=3, noise=1e-7),
+    "coarse-to-fine": dict(start_level=1),
+    "coarse-to-fine, dt x sqrt(2) per level": dict(start_level=1, dt_growth=2 ** 0.5),
+    "local": dict(start_level=1, refine="local"),
+    "5 levels, jacobi": dict(start_level=3, levels=5, preconditioner="jacobi"),
+    "5 levels, multigrid": dict(start_level=3, levels=5, preconditioner="multigrid"),
+}
+DEFAULT_MODES = ["finest", "finest (noise)", "coarse-to-fine", "coarse-to-fine, dt x sqrt(2) per level", "local"]
+
+
+def run_to_rest(start_level: int, frames: int, noise: float = 0.0, dt_growth: float = 1.0, refine: str = "global",
+                levels: int = 3, preconditioner: str = "auto"):
+    """(figures dict, rest positions (P,3), triangles (T,3)) of the T-shirt run from start_level (1-based) of
+    `levels`, refined `refine` ("global" or "local"), CG preconditioned by `preconditioner`."""
     from taichi_cloth.garment.metrics import garment_quality
     from taichi_cloth.scenefile import load_scene
 
     cfg = tomllib.loads(SCENE.read_text())
+    cfg["multilevel"]["levels"] = levels
     cfg["multilevel"]["start_level"] = start_level
     cfg["multilevel"]["dt_growth"] = dt_growth
     cfg["multilevel"]["refine"] = refine
+    cfg["integrator"]["preconditioner"] = preconditioner
     cfg["frames"] = frames
     loaded = load_scene(cfg, base_dir=SCENE.parent, out=ROOT / "out" / "bench")
     scene = loaded.scene
@@ -61,8 +81,10 @@ def run_to_rest(start_level: int, frames: int, noise: float = 0.0, dt_growth: fl
     wall = time.perf_counter() - t0
     q = garment_quality(scene)
     refiner = scene.controller("refiner")
+    steps = max(scene.steps_taken, 1)
     return dict(wall=wall, after_first=wall - summary.first_frame_wall, sim=scene.state.t,
-                at_rest=summary.stopped_at_rest, rest=summary.rest,
+                at_rest=summary.stopped_at_rest, rest=summary.rest, solver=scene.integrator.detail,
+                cg_per_step=scene.integrator.stats["cg_iterations"] / steps, ms_per_step=1e3 * wall / steps,
                 particles=scene.model.data.n_particles,
                 levels=" ".join(f"{s.level + 1}@{s.t:.2f}s" for s in refiner.switches), quality=q,
                 inside=q.penetrations), scene.positions(), scene.model.data.triangles.copy()
@@ -87,27 +109,29 @@ def quality_difference(qa, qb, keys=("area_error", "boundary_error", "max_strain
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--frames", type=int, default=1800, help="the most frames a run may take (60 a second)")
+    ap.add_argument("--arch", choices=("cpu", "gpu"), default="cpu")
+    ap.add_argument("--modes", nargs="+", choices=list(RUNS), default=DEFAULT_MODES,
+                    help="the runs (finest and coarse-to-fine always: the others are compared with them)")
     args = ap.parse_args(argv)
     import taichi_cloth as tc
 
-    tc.init("cpu")
-    runs = [("finest", 3, 0.0, 1.0, "global"), ("finest (noise)", 3, 1e-7, 1.0, "global"),
-            ("coarse-to-fine", 1, 0.0, 1.0, "global"), ("coarse-to-fine, dt x sqrt(2) per level", 1, 0.0, 2 ** 0.5,
-                                                          "global"),
-            ("local", 1, 0.0, 1.0, "local")]
+    tc.init(args.arch)
+    always = ["finest", "coarse-to-fine"]
+    modes = always + [m for m in RUNS if m in args.modes and m not in always]
     results = {}
-    for name, start, noise, growth, refine in runs:
-        results[name] = run_to_rest(start, args.frames, noise, growth, refine)
+    for name in modes:
+        results[name] = run_to_rest(frames=args.frames, **RUNS[name])
         r = results[name][0]
         print(f"{name}: {r['wall']:.1f} s wall, {r['sim']:.2f} s simulated, at rest {r['at_rest']}, levels "
-              f"{r['levels']}; {r['rest']}", flush=True)
+              f"{r['levels']}, {r['ms_per_step']:.1f} ms and {r['cg_per_step']:.0f} CG iterations per step "
+              f"({r['solver']}); {r['rest']}", flush=True)
     ref, xr, tr = results["finest"]
     _, xg, tg = results["coarse-to-fine"]
     rows = []
     print("| mode | wall time to rest [s] | the same after frame 1 [s] | simulated [s] | speed-up after frame 1 "
           "| particles at rest | RMS distance to finest [mm] | to coarse-to-fine [mm] | quality table vs finest [pp] "
-          "| the same without max strain [pp] | inside the body | levels (entered at) |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+          "| the same without max strain [pp] | inside the body | levels (entered at) | ms/step | CG iterations/step |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for name, (r, x, t) in results.items():
         dist, dist_g = surface_distance(x, t, xr, tr), surface_distance(x, t, xg, tg)
         dq, where = quality_difference(r["quality"], ref["quality"])
@@ -117,11 +141,12 @@ def main(argv=None) -> int:
                          at_rest=r["at_rest"], particles=r["particles"], rms_distance_mm=1e3 * dist,
                          rms_distance_coarse_to_fine_mm=1e3 * dist_g, quality_pp=dq, quality_largest=where,
                          quality_without_max_strain_pp=dq_whole, inside=r["inside"],
-                         levels=r["levels"]))
+                         levels=r["levels"], ms_per_step=r["ms_per_step"], cg_per_step=r["cg_per_step"]))
         print(f"| {name} | {r['wall']:.1f}{'' if r['at_rest'] else ' (not at rest)'} | {r['after_first']:.1f} | "
               f"{r['sim']:.2f} | {ref['after_first'] / r['after_first']:.2f}x | {r['particles']} | {1e3 * dist:.2f} | "
-              f"{1e3 * dist_g:.2f} | {dq:.2f} ({where}) | {dq_whole:.2f} | {r['inside']} | {r['levels']} |")
-    out = ROOT / "out" / "bench"
+              f"{1e3 * dist_g:.2f} | {dq:.2f} ({where}) | {dq_whole:.2f} | {r['inside']} | {r['levels']} | "
+              f"{r['ms_per_step']:.1f} | {r['cg_per_step']:.0f} |")
+    out = ROOT / "out" / "bench"  # the csv beside the scenes' recordings
     out.mkdir(parents=True, exist_ok=True)
     with open(out / "multilevel_garment.csv", "w", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=list(rows[0]))

@@ -8,8 +8,10 @@ The system of one implicit step (Baraff and Witkin 1998), on level l:
 u_s the spring's unit direction and l_s its length at the current positions (the clamp g >= 0 keeps A symmetric
 positive definite). M, k, kd, L0 [kg, N/m, N s/m, m] are the level's own: every 4-8 level of a cloth is built
 from the same material (taichi_cloth.multilevel_cloth), so the coarse operators are rediscretisations of the fine
-one. The hierarchy is nested (a vertex of level l keeps its index on every finer level), so the positions of
-the finest level simulated give every coarser level its geometry: the coarse springs point where the cloth is.
+one. Every vertex of level l has a copy on level l + 1 (a vertex whose prolongation row is that one vertex with
+weight 1): the same index on a 4-8 rectangle, where the levels are nested by index, another one on a garment's
+levels, nested by their tables (taichi_cloth.garment.levels). Following the copies up to the level simulated
+gives every coarser level its geometry from the simulated positions: the coarse springs point where the cloth is.
 
 A V(nu, nu) cycle (the preconditioner, symmetric as CG needs):
   * smoother: block Jacobi, dv_i += omega D_i^-1 (b - A dv)_i with D_i the 3x3 diagonal block of A;
@@ -17,7 +19,9 @@ A V(nu, nu) cycle (the preconditioner, symmetric as CG needs):
     hierarchy's tables, applied to each component;
   * the coarsest level is solved exactly: its 3 n0 x 3 n0 matrix is assembled and factored (Cholesky, float64)
     once per step, in one thread (n0 = 25 for the usual 4 x 4 base: about 0.1 ms);
-  * pins: a particle of the simulated level with inverse mass 0 is fixed; a coarser vertex is fixed iff it is a
+  * pins: a particle of the simulated level with inverse mass 0 is fixed, and so is one that static friction holds
+    this step (`held`: the filtered system fixes it as it fixes a pin; without this a garment at rest on a body,
+    the 4-8 T-shirt, took 156 CG iterations per step instead of 58); a coarser vertex is fixed iff it is a
     prolongation parent of a fixed vertex of the level above, so that a prolonged correction vanishes at the
     pins by construction (multilevel.multigrid explains why zeroing the correction afterwards is not enough).
     Both are decided on the device at every prepare, so pins that move between levels need no host work.
@@ -49,22 +53,30 @@ COARSE_MAX = 128
 SERIAL_BELOW = 1 << 30
 
 
-def nested(levels: list[Level]) -> bool:
-    """Whether every level keeps the vertices of the level above at the same indices (4-8 rectangles)."""
-    for prev, lv in zip(levels, levels[1:]):
-        n = prev.n_vertices
-        if lv.n_vertices < n or not (np.array_equal(lv.parents[:n, 0], np.arange(n))
-                                     and np.all(lv.weights[:n, 0] == 1.0)):
-            return False
-    return True
+def copies(levels: list[Level]) -> list[np.ndarray]:
+    """Per level l but the finest, (n_l,) int64: the index on level l + 1 of each vertex's copy (the vertex whose
+    prolongation row is that vertex alone, with weight 1). ValueError when a vertex has none (tables that are not a
+    nested hierarchy)."""
+    out = []
+    for l, (prev, lv) in enumerate(zip(levels, levels[1:])):
+        live = (lv.parents >= 0) & (lv.weights != 0)
+        single = (live.sum(1) == 1) & live[:, 0] & (lv.weights[:, 0] == 1.0)
+        copy = np.full(prev.n_vertices, -1, np.int64)
+        fine = np.nonzero(single)[0][::-1]  # the first copy wins where there are several
+        copy[lv.parents[fine, 0]] = fine
+        if (copy < 0).any():
+            raise ValueError(f"level {l + 1} has {int((copy < 0).sum())} vertices without a copy on level {l + 2}: "
+                             "the spring multigrid needs nested levels")
+        out.append(copy)
+    return out
 
 
 @ti.data_oriented
 class SpringMultigrid:
     """V-cycles over nested 4-8 levels for the implicit spring system (see the module docstring).
 
-    levels:      the hierarchy's levels (0 = coarsest), nested
-    springs:     per level, (s_l, 2) int64 particle indices of each spring (level-local = fine indices)
+    levels:      the hierarchy's levels (0 = coarsest), nested (see `copies`)
+    springs:     per level, (s_l, 2) int64 vertex indices of each spring on its level
     stiffness, damping, rest_length: per level, (s_l,) float64 [N/m], [N s/m], [m]
     mass:        per level, (n_l,) float64 [kg]
     viscous:     per level, (s_l,) float64 [N s/m]: the isotropic dashpot of each spring (None: none)
@@ -80,8 +92,7 @@ class SpringMultigrid:
             viscous = [np.zeros(len(s)) for s in springs]
         if L < 1 or not all(len(a) == L for a in (springs, stiffness, damping, rest_length, mass, viscous)):
             raise ValueError("need springs, stiffness, damping, rest_length and mass for every level")
-        if not nested(levels):
-            raise ValueError("the spring multigrid needs nested levels (a 4-8 rectangle hierarchy)")
+        copy = copies(levels)
         if levels[0].n_vertices > COARSE_MAX:
             raise ValueError(f"the coarsest level has {levels[0].n_vertices} vertices, more than {COARSE_MAX} for "
                              "its dense factorisation: build the cloth on a smaller base")
@@ -103,8 +114,8 @@ class SpringMultigrid:
             s = np.asarray(s, np.int64).reshape(-1, 2)
             if len(s) and (s.min() < 0 or s.max() >= self.sizes[l]):
                 raise ValueError(f"level {l}: a spring end lies outside 0..{self.sizes[l] - 1}")
-            ends.append(s)
             g = s + self.offsets[l]
+            ends.append(g)
             q = np.arange(len(s)) + self.spring_offsets[l]
             rows += [g[:, 0], g[:, 1]]
             adj_other += [g[:, 1], g[:, 0]]
@@ -113,6 +124,9 @@ class SpringMultigrid:
         order = np.argsort(rows, kind="stable")
         adj_ptr = np.zeros(N + 1, np.int64)
         np.cumsum(np.bincount(rows, minlength=N), out=adj_ptr[1:])
+        up = np.full(N, -1, np.int64)  # the copy of each vertex on the next level, as a packed index
+        for l, c in enumerate(copy):
+            up[self.offsets[l]:self.offsets[l + 1]] = c + self.offsets[l + 1]
         par = np.full((N, 3), -1, np.int64)
         pw = np.zeros((N, 3))
         r_rows, r_cols, r_w = [], [], []
@@ -148,8 +162,10 @@ class SpringMultigrid:
         self.adj_ptr = blk.scalar(ti.i32, N + 1)
         self.adj_other = blk.scalar(ti.i32, max(len(adj_other), 1))
         self.adj_spring = blk.scalar(ti.i32, max(len(adj_spring), 1))
-        self.end_a = blk.scalar(ti.i32, max(Ns, 1))       # spring ends, level-local (= fine) indices
+        self.end_a = blk.scalar(ti.i32, max(Ns, 1))       # spring ends, packed indices
         self.end_b = blk.scalar(ti.i32, max(Ns, 1))
+        self.up = blk.scalar(ti.i32, N)                   # each vertex's copy on the next level (packed; -1 finest)
+        self.at = blk.scalar(ti.i32, N)                   # each vertex's particle on the simulated level
         self.k = blk.scalar(fp, max(Ns, 1))               # [N/m]
         self.kd = blk.scalar(fp, max(Ns, 1))              # [N s/m]
         self.c = blk.scalar(fp, max(Ns, 1))               # [N s/m] isotropic dashpot
@@ -167,6 +183,7 @@ class SpringMultigrid:
         self.mass_scale = blk.scalar(fp, ())              # 1 + h gamma of the current step
         self.level = blk.scalar(ti.i32, ())               # the active level
         self.weight = blk.scalar(fp, ())                  # omega
+        self.no_hold = blk.scalar(ti.i32, N)              # zeros: `held` when prepare is given none
         blk.finalize(self)
         self.omega = float(omega)
 
@@ -185,6 +202,7 @@ class SpringMultigrid:
             self.kd.from_numpy(cat(damping).astype(npf))
             self.c.from_numpy(cat(viscous).astype(npf))
             self.rest.from_numpy(cat(rest_length).astype(npf))
+        self.up.from_numpy(up.astype(np.int32))
         self.par.from_numpy(par.astype(np.int32))
         self.pw.from_numpy(pw.astype(npf))
         self.r_ptr.from_numpy(r_ptr.astype(np.int32))
@@ -214,12 +232,14 @@ class SpringMultigrid:
         self._omega = float(value)
         self.weight[None] = self._omega
 
-    def prepare(self, x, inv_mass, h: float, gamma: float) -> None:
+    def prepare(self, x, inv_mass, h: float, gamma: float, held=None) -> None:
         """Once per step, before the cycles: the springs' directions and coefficients at the positions x (the
         simulated level's (P,) vec3 field [m]), the pins (where inv_mass, its (P,) field, is 0, and their
         parents), the block inverses and the coarsest factor, for the step h [s] and the air drag gamma [1/s].
-        One kernel launch."""
-        self._prepare(x, inv_mass, float(h), float(h * gamma), int(self.spring_offsets[self._active + 1]))
+        held: an optional (P,) i32 field, nonzero where a particle is fixed this step as a pin is (contacts that
+        static friction holds). One kernel launch."""
+        self._prepare(x, inv_mass, held if held is not None else self.no_hold, float(h), float(h * gamma),
+                      int(self.spring_offsets[self._active + 1]))
 
     def apply(self, r, z) -> None:
         """z = V-cycle(r) on the active level: r, z are (P,) vec3 fields of the simulated level [kg m/s], [m/s]
@@ -255,16 +275,28 @@ class SpringMultigrid:
 
     # ------------------------------------------------------------------ the kernels
     @ti.kernel
-    def _prepare(self, x: ti.template(), inv_mass: ti.template(), h: ti.f64, h_gamma: ti.f64, n_springs: ti.i32):
+    def _prepare(self, x: ti.template(), inv_mass: ti.template(), held: ti.template(), h: ti.f64, h_gamma: ti.f64,
+                 n_springs: ti.i32):
         L = ti.static(self.n_levels)
         hh = ti.cast(h, self.fp)
         mass_scale = 1.0 + ti.cast(h_gamma, self.fp)
         self.mass_scale[None] = mass_scale
         active = self.level[None]
+        # every vertex's particle on the simulated level: its own, then from the finest down, its copy's
+        for l in ti.static(range(L)):
+            ti.loop_config(serialize=ti.static(self.sizes[l] < self.serial_below))
+            for i in range(ti.select(l == active, ti.static(self.sizes[l]), 0)):
+                self.at[ti.static(int(self.offsets[l])) + i] = i
+        for k in ti.static(range(L - 1)):
+            l = ti.static(L - 2 - k)
+            ti.loop_config(serialize=ti.static(self.sizes[l] < self.serial_below))
+            for i in range(ti.select(l < active, ti.static(self.sizes[l]), 0)):
+                g = ti.static(int(self.offsets[l])) + i
+                self.at[g] = self.at[self.up[g]]
         # the springs of every level up to the active one, at the positions of the simulated level
         ti.loop_config(serialize=ti.static(int(self.spring_offsets[-1]) < self.serial_below))
         for q in range(n_springs):
-            d = x[self.end_b[q]] - x[self.end_a[q]]
+            d = x[self.at[self.end_b[q]]] - x[self.at[self.end_a[q]]]
             length = d.norm()
             u = d / ti.max(length, 1e-12)
             g = ti.max(0.0, 1.0 - self.rest[q] / ti.max(length, 1e-12))
@@ -276,7 +308,7 @@ class SpringMultigrid:
             ti.loop_config(serialize=ti.static(self.sizes[l] < self.serial_below))
             for i in range(self._count(l)):
                 g = ti.static(int(self.offsets[l])) + i
-                self.pin[g] = ti.select((l == active) & (inv_mass[i] == 0), 1, 0)
+                self.pin[g] = ti.select((l == active) & ((inv_mass[i] == 0) | (held[i] != 0)), 1, 0)
         for k in ti.static(range(L - 1)):
             l = ti.static(L - 1 - k)  # from the finest down: level l marks the parents on level l - 1
             ti.loop_config(serialize=ti.static(self.sizes[l] < self.serial_below))

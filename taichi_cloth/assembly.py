@@ -241,20 +241,31 @@ def _attach_levels(stepper, integrator: str, source: _Source, multilevel, specs,
     """Give an integrator that asks for them the cloth's 4-8 levels (nested ones: global refinement). One that
     cannot do without them refuses the scene; the implicit integrator's multigrid preconditioner builds levels by
     aggregation instead (asked for by name, or on a cloth of at least its AGGREGATION_FROM particles), or falls back
-    to Jacobi (and says so when it was asked for by name)."""
+    to Jacobi (and says so when it was asked for by name). A garment's levels serve only a preconditioner asked for
+    by name ("multigrid"; `auto` keeps aggregation or Jacobi, see Implicit.GARMENT_LEVELS); its pieces are apart on
+    none of them until their seams merge on the start level: the levels are attached for then, and aggregation
+    serves before."""
     ml = source.multilevel
+    garment = source.garment is not None
     why = None
     if ml is None:
         why = "needs a multilevel cloth ([multilevel] in a scene file, ClothBuilder.multilevel_grid in Python)"
     elif (multilevel or {}).get("refine") == "local":
         why = "needs the nested levels of global refinement, not refine = local"
+    elif garment and getattr(stepper, "levels_required", True):
+        why = "cannot sew a garment: its pieces apart are on none of its 4-8 levels"
+    elif garment and not (stepper.options.get("preconditioner") == "multigrid" or stepper.GARMENT_LEVELS):
+        why = "is used on a garment's levels only when asked for by name"
+    attached = False
     if why is None:
         try:
             stepper.attach_levels(ml.hierarchy.levels, ml.levels, [pinned_mask(specs, d.positions) for d in ml.levels],
-                                  ml.start_level)
-            return
-        except ValueError as err:  # e.g. levels that are not nested (outlines), a coarsest level too large
+                                  None if garment else ml.start_level)
+            attached = True
+        except ValueError as err:  # e.g. a coarsest level too large for its dense factorisation
             why = str(err)
+    if attached and not garment:
+        return
     if getattr(stepper, "levels_required", True):
         raise SceneError(f"integrator {integrator!r} with multigrid_cycles {why}")
     if stepper.options.get("preconditioner") == "multigrid" or \
@@ -264,7 +275,7 @@ def _attach_levels(stepper, integrator: str, source: _Source, multilevel, specs,
             return
         except ValueError as err:
             why = f"{why}, and aggregation failed: {err}"
-    if stepper.options.get("preconditioner") == "multigrid":
+    if stepper.options.get("preconditioner") == "multigrid" and not attached:
         msg = f"the multigrid preconditioner {why}; integrator {integrator!r} uses Jacobi instead"
         notes.append(msg)
         warn(msg)

@@ -51,7 +51,8 @@ class ModelChange:
     rest:      or put every particle at its (new) rest position, at rest
     prolong:   or a callable prolong(state, n_before) that fills the state in place after the refill (a level
                switch: the new vertices from their parents); n_before is the particle count before it
-    level:     the 4-8 level now simulated (0-based), for integrators that keep per-level data
+    level:     the 4-8 level now simulated (0-based), for integrators that keep per-level data (a level switch,
+               or a garment's seams merged on its start level)
     garment:   a garment's locally refined level (taichi_cloth.garment.levels.GarmentLevel) when `data` is one
                (the sewing follows it instead of the hierarchy's level)
     dt_scale:  the step on this model as a multiple of the scene's base step (coarse levels may step larger)

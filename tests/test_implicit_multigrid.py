@@ -107,13 +107,19 @@ def test_multigrid_and_jacobi_give_the_same_step_and_multigrid_needs_far_fewer_i
 
 def test_a_v_cycle_is_symmetric_and_positive_on_the_free_rows():
     """CG needs a symmetric positive definite preconditioner: z = V(r) is linear, <V r1, r2> = <r1, V r2>, and
-    <V r, r> > 0 on the free rows (the pinned ones come out 0)."""
+    <V r, r> > 0 on the free rows (the pinned ones, and the ones static friction holds, come out 0)."""
     sc = sheet_on_a_ball("multigrid")
     mg = sc.integrator.multigrid
     mg.prepare(sc.state.x, sc.model.inv_mass, H, GAMMA)
     free = ~sc.model.pinned
     z1 = assert_symmetric_positive(mg, np.random.default_rng(5), free)
     assert np.abs(z1[~free]).max() == 0
+    # particles held by static friction are held by the cycle as pins are (what the filtered system does)
+    stuck = sc.state.contacts.stuck.to_numpy()[: sc.model.data.n_particles] != 0
+    assert stuck.sum() >= 1
+    mg.prepare(sc.state.x, sc.model.inv_mass, H, GAMMA, sc.state.contacts.stuck)
+    z1 = assert_symmetric_positive(mg, np.random.default_rng(5), free & ~stuck)
+    assert np.abs(z1[~free | stuck]).max() == 0
 
 
 def assert_symmetric_positive(mg, rng, rows) -> np.ndarray:
@@ -287,3 +293,52 @@ def test_aggregation_levels_follow_the_seam_merge_without_compiling():
     # the merge reloads the level tables: only Taichi's own numpy transfers compile, no kernel of the engine
     assert all("ext_arr" in k for k in cc.compiled), cc.compiled
     assert sc.integrator.last_residual <= 1e-3
+
+
+def test_a_garment_on_its_4_8_levels_uses_them_once_merged_and_a_step_equals_the_direct_solve():
+    """One hierarchy, two uses: a garment sewn coarse to fine (taichi_cloth.garment.levels) is preconditioned by
+    V-cycles over the same levels the refiner switches between, from the seam merge on (its pieces apart are on no
+    level: aggregation levels before). Its levels are nested by their tables, not by index
+    (multilevel.spring_multigrid.copies), and a step on level 2 of 3 equals the direct solve of the filtered system.
+    `auto` keeps Jacobi on a garment this small."""
+    from multilevel.spring_multigrid import copies
+    from taichi_cloth.garment.levels import multilevel_garment
+    from test_multilevel_garment import SPHERE, two_squares
+
+    mg = multilevel_garment(two_squares(), start_level=0)
+    sc = tc.Scene(mg, dt=H, air_damping=GAMMA, precision="f64", colliders=[SPHERE], multilevel={"refine": False},
+                  integrator_options={"preconditioner": "multigrid", "cg_tolerance": 1e-12, "cg_max_iterations": 2000,
+                                      "newton_iterations": 1, "line_search": False})
+    integ, sewing = sc.integrator, sc.controller("sewing")
+    levels, apart = integ.level_multigrid, integ.multigrid
+    assert isinstance(apart, AggregationMultigrid) and levels.n_levels == 3  # the pieces apart (242 particles)
+    assert any(not np.array_equal(c, np.arange(len(c))) for c in copies(mg.cloth.hierarchy.levels))
+    frames = 0
+    while not sewing.joined and frames < 60:
+        sc.run(1, progress=False)
+        frames += 1
+    assert sewing.joined and integ.multigrid is levels and levels.active == 0
+    assert "V-cycles over 3 4-8 levels once on them (before: aggregation levels)" in integ.detail
+    sc.apply(sc.controller("refiner").refine())
+    assert levels.active == 1 and sc.model.data.n_particles == mg.levels[1].merged.n_particles
+    sc.run(12, progress=False)  # on the sphere (contacts), the seams merged
+    n = sc.model.data.n_particles
+    touching = np.linalg.norm(sc.state.contacts.normal.to_numpy()[:n], axis=1) > 0
+    assert 4 < touching.sum() < n - 10, touching.sum()
+    expected = filtered_solve(sc)
+    v = sc.velocities()
+    solve_after_friction(sc)
+    np.testing.assert_allclose(sc.velocities() - v, expected, rtol=0, atol=1e-9 * np.abs(expected).max())
+    levels.prepare(sc.state.x, sc.model.inv_mass, H, GAMMA)
+    assert_symmetric_positive(levels, np.random.default_rng(11), np.ones(n, bool))
+    # level 1's springs point where their ends' copies on level 2 (simulated) are
+    copy = copies(mg.cloth.hierarchy.levels)[0]
+    n0, s0 = levels.sizes[0], levels.spring_counts[0]
+    assert np.array_equal(levels.at.to_numpy()[:n0], copy)
+    ends = mg.cloth.levels[0].springs
+    d = sc.positions()[copy[ends[:, 1]]] - sc.positions()[copy[ends[:, 0]]]
+    np.testing.assert_allclose(levels.u.to_numpy()[:s0], d / np.linalg.norm(d, axis=1, keepdims=True), atol=1e-12)
+    sc.reset()  # the pieces apart again: off the levels
+    assert integ.multigrid is apart and sc.model.data.n_particles == mg.garment.data.n_particles
+    small = tc.Scene(mg, dt=H, colliders=[SPHERE])
+    assert small.integrator.level_multigrid is None and small.integrator.multigrid is None

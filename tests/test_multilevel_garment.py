@@ -45,7 +45,7 @@ class SwitchProbe(Controller):
         self.scene, self.after = scene, []
 
     def model_changed(self, change, t, dt):
-        if change.level is not None:
+        if change.level is not None and change.prolong is not None:  # a switch (the merge names its level too)
             s = self.scene
             sewing = s.controller("sewing")  # it ran its own model_changed before this one
             self.after.append((change.level, s.positions(), s.velocities(), s.model.data, sewing.current_of,

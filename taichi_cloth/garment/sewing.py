@@ -225,7 +225,9 @@ class Sewing(Controller):
                  f"time, compiles included (largest gap {1e3 * gap:.2f} mm): {what}; {data.n_particles} particles now")
         if join == "none":
             return ModelChange(event=event)
-        return ModelChange(data=data, x=x, v=v, topology=join == "merge", event=event)
+        # merged on a garment's levels, the model is its start level (the numbering is the same merge's)
+        level = self.levels.start_level if self.levels is not None and join == "merge" else None
+        return ModelChange(data=data, x=x, v=v, topology=join == "merge", level=level, event=event)
 
     # ------------------------------------------------------------------ what a recording shows
     def layout(self, layout) -> None:

@@ -35,11 +35,13 @@ Preconditioners (option `preconditioner`):
              iterations per launch; CG starts from the last step's velocity change;
   multigrid  a V(1,1) cycle per CG iteration, applied as z = S V(S r), which keeps the preconditioner symmetric on
              the free subspace: over the cloth's nested 4-8 levels where it has them (multilevel.spring_multigrid:
-             the same system rediscretised on every level), else over levels made by aggregating neighbouring
+             the same system rediscretised on every level; a garment's levels once its seams are merged, the ones
+             its refiner switches between), else over levels made by aggregating neighbouring
              particles (multilevel.aggregation: Galerkin coarse operators of the filtered system; any cloth, a
              sewn garment or a mesh file);
-  auto       (the default) multigrid over 4-8 levels where the cloth has them, over aggregates on a cloth of at least
-             AGGREGATION_FROM particles, else jacobi. The run summary names the one used.
+  auto       (the default) multigrid over 4-8 levels where the cloth has them (not a garment's: GARMENT_LEVELS),
+             over aggregates on a cloth of at least AGGREGATION_FROM particles, else jacobi. The run summary names
+             the one used.
 CG stops when sqrt(r.z / b.z_b) <= cg_tolerance (z = the preconditioned residual: D^-1 r, or the V-cycle's; z_b the
 preconditioned b, so that a warm start that begins close stops early) or after cg_max_iterations. (A test on |r|
 alone stopped multigrid-CG at bad points: twice the error at a tolerance of 0.1.)
@@ -90,6 +92,11 @@ class Implicit(Integrator):
     #: at the demo's 1e-2 (4.1 against 4.0 ms); a 64 x 64 grid held by one edge 22.9 against 27.0 ms (33 against
     #: 198 = the cap). Below it the cycle's kernels cost more to compile (about 6 s) than they save.
     AGGREGATION_FROM = 2000
+    #: whether `auto` preconditions a garment by V-cycles over its own 4-8 levels once its seams are merged. No:
+    #: over a run to rest on a 2-core CPU, the demo T-shirt on 5 levels (1,370 particles) took 58 CG iterations
+    #: per step over them against Jacobi's 95 but 28.8 ms per step against 16.8; on 6 levels (2,512) 79 against
+    #: 117 but 56 ms against 20 (its contacts are outside the rediscretised coarse levels). "multigrid" asks for it.
+    GARMENT_LEVELS = False
     #: CG iterations unrolled into one kernel launch; iterations past convergence inside a chunk are no-ops
     CHUNK = 8
     _DELTA, _THRESH, _BETA, _ACTIVE, _ITER, _MAXIT, _DELTA0, _RR, _DECREMENT, _RISE = range(10)  # slots of self.cg
@@ -116,7 +123,10 @@ class Implicit(Integrator):
         self.stats = {"cg_iterations": 0, "cg_unconverged_steps": 0, "newton_iterations": 0, "line_search_cuts": 0}
         self.last_residual = 0.0  # sqrt(r.Pr / b.Pb) at the end of the last step
         self._warned_cap = False
-        self.multigrid = None
+        self.multigrid = None        # the preconditioner in use: None (Jacobi), 4-8 levels or aggregation levels
+        self.level_multigrid = None  # over the cloth's 4-8 levels, when it has nested ones
+        self.off_levels = None       # what is used while the model is on none of them: None or aggregation
+        self.starts_off_levels = False  # the model starts on none of the levels (a garment's pieces apart)
         # Jacobi-PCG starts from the previous step's dv: it carries over the smooth part Jacobi is slow to find
         # (measured on a 65 x 65 cotton sheet held by one edge at 1/60 s: 43 mm RMS from the exact step's
         # trajectory after 0.5 s instead of 190 mm, with 15 % fewer iterations). Multigrid finds the smooth part
@@ -142,36 +152,59 @@ class Implicit(Integrator):
         """Whether this integrator wants the cloth's 4-8 levels (attach_levels) when it has nested ones."""
         return self.options["preconditioner"] != "jacobi"
 
-    def attach_levels(self, levels, cloth_levels, pinned, level: int) -> None:
+    def attach_levels(self, levels, cloth_levels, pinned, level: int | None) -> None:
         """Build the multigrid preconditioner over a nested 4-8 hierarchy: `levels` (multilevel Level list),
-        `cloth_levels` (ClothData per level: masses, springs, spring constants, rest lengths), `pinned` (unused:
-        the pins are read from the inverse masses at every step) and the current level (0-based)."""
+        `cloth_levels` (ClothData per level: masses, springs, spring constants), `pinned` (unused: the pins are
+        read from the inverse masses at every step) and the current level (0-based), or None while the model is on
+        none of them (a garment's pieces apart before their seams merge on its start level): CG keeps the
+        preconditioner it has (Jacobi, or aggregation levels) until a topology change names a level. Raises
+        ValueError when the levels are not nested (multilevel.spring_multigrid.copies) or the coarsest is too large."""
         from multilevel.spring_multigrid import SERIAL_BELOW, SpringMultigrid
 
-        self.multigrid = SpringMultigrid(levels, [d.springs for d in cloth_levels], [d.stiffness for d in cloth_levels],
-                                         [d.damping for d in cloth_levels], [d.rest_length for d in cloth_levels],
-                                         [d.mass for d in cloth_levels], fp=self.model.fp,
-                                         viscous=[d.viscous_damping() for d in cloth_levels],
-                                         serial_below=1 << 62 if self.model.serial else SERIAL_BELOW)
-        self.multigrid.set_active_level(level)
-        self.warm[None] = 0
+        self.level_multigrid = SpringMultigrid(
+            levels, [d.springs for d in cloth_levels], [d.stiffness for d in cloth_levels],
+            [d.damping for d in cloth_levels], [d.rest_length for d in cloth_levels], [d.mass for d in cloth_levels],
+            fp=self.model.fp, viscous=[d.viscous_damping() for d in cloth_levels],
+            serial_below=self._serial_below(SERIAL_BELOW))
+        self.starts_off_levels = level is None
+        if level is not None:
+            self.level_multigrid.set_active_level(level)
+            self.multigrid = self.level_multigrid
+            self.warm[None] = 0
+
+    def _serial_below(self, cpu_threshold: int) -> int:
+        """The level size below which the 4-8 cycle runs a loop in one thread: every loop for a cloth the CPU runs
+        serially, the measured threshold on the CPU, none on a GPU (where the CPU's threshold ran every loop in one
+        GPU thread: an H100 took 170 ms per step, 4.7 V-cycles, on a 65 x 65 sheet that way)."""
+        if self.model.serial:
+            return 1 << 62
+        return cpu_threshold if ti.lang.impl.current_cfg().arch == ti.cpu else 0
 
     def attach_aggregation(self) -> None:
         """Build the multigrid preconditioner over aggregates of the cloth's particles (multilevel.aggregation),
-        for a cloth without nested 4-8 levels; rebuilt at every topology change. Raises ValueError when the cloth
-        does not coarsen (it stays on Jacobi)."""
+        for a cloth without nested 4-8 levels (or before it is on them); rebuilt at every topology change. Raises
+        ValueError when the cloth does not coarsen (it stays on Jacobi)."""
         amg = AggregationMultigrid(self.model.capacity[:2], fp=self.model.fp,
                                    serial=ti.lang.impl.current_cfg().arch == ti.cpu)
         amg.rebuild(self.model.data.springs, self.model.data.n_particles)
-        self.multigrid = amg
+        self.multigrid = self.off_levels = amg
         self.warm[None] = 0
 
     def topology_changed(self, level: int | None = None) -> None:
+        """A refill of the model: on the 4-8 level `level` (a level switch, a garment's seams merged on its start
+        level), or with no level named: on the level it was on when its particle count is that level's (new spring
+        constants), else off the levels again (a garment's pieces apart after a reset)."""
         self.reset()
+        mg = self.level_multigrid
+        if mg is not None:
+            if level is not None:
+                mg.set_active_level(level)
+                self.multigrid = mg
+            elif self.model.data.n_particles != mg.sizes[mg.active]:
+                self.multigrid = self.off_levels
         if isinstance(self.multigrid, AggregationMultigrid):
             self.multigrid.rebuild(self.model.data.springs, self.model.data.n_particles)
-        elif self.multigrid is not None and level is not None:
-            self.multigrid.set_active_level(level)
+        self.warm[None] = int(self.options["warm_start"] and self.multigrid is None)
 
     @property
     def detail(self) -> str:
@@ -179,7 +212,11 @@ class Implicit(Integrator):
             sizes = " > ".join(str(n) for n in self.multigrid.sizes)
             return f"CG preconditioned by V-cycles over {len(self.multigrid.sizes)} aggregation levels ({sizes})"
         if self.multigrid is not None:
-            return f"CG preconditioned by V-cycles over {self.multigrid.n_levels} 4-8 levels"
+            before = ""
+            if self.level_multigrid is not None and self.starts_off_levels:
+                before = " once on them (before: " + ("aggregation levels)" if self.off_levels is not None else
+                                                      "Jacobi)")
+            return f"CG preconditioned by V-cycles over {self.multigrid.n_levels} 4-8 levels{before}"
         return "Jacobi-preconditioned CG"
 
     def _prepare_multigrid(self, dt: float) -> None:
@@ -190,7 +227,8 @@ class Implicit(Integrator):
                        self.contacts if self.has_contacts else None,
                        1.0 + dt * self.forces.air_damping_value)
         else:
-            mg.prepare(self.state.x, self.model.inv_mass, dt, self.forces.air_damping_value)
+            mg.prepare(self.state.x, self.model.inv_mass, dt, self.forces.air_damping_value,
+                       self.contacts.stuck if self.has_contacts else None)
 
     # ------------------------------------------------------------------ the step
     def _advance(self, dt: float) -> None:
@@ -312,7 +350,6 @@ class Implicit(Integrator):
         warm start."""
         m, s = self.model, self.state
         NA = ti.static(len(self.ALPHAS))
-        grav = ti.cast(self.forces.gravity[None], ti.f64)
         self.cut[None] = 0
         self.energy[NA + 1] = 0.0
         ti.loop_config(serialize=self.model.serial)
@@ -320,6 +357,7 @@ class Implicit(Integrator):
             self.x0[i] = s.x[i]
             self.v0[i] = s.v[i]
             if m.inv_mass[i] != 0:
+                grav = ti.cast(self.forces.gravity[None], ti.f64)  # in the loop: see _line_search
                 mass, v, x = ti.cast(m.mass[i], ti.f64), ti.cast(s.v[i], ti.f64), ti.cast(s.x[i], ti.f64)
                 self.energy[NA + 1] += 0.5 * mass * v.dot(v) - mass * grav.dot(x)
         ti.loop_config(serialize=self.model.serial)
@@ -502,11 +540,12 @@ class Implicit(Integrator):
         return ti.cast(cg[self._ACTIVE] != 0, ti.i32)
 
     @ti.func
-    def _particle_potential(self, i, hh, gamma, grav, ext, j0: ti.template(), j1: ti.template()):
+    def _particle_potential(self, i, hh, gamma, ext, j0: ti.template(), j1: ti.template()):
         """Adds particle i's inertia, gravity, air drag and external-force terms of IP, and its kinetic and gravity
         energy, for the candidates j0 <= j < j1 (j = 0: alpha = 0, j: ALPHAS[j - 1])."""
         m = self.model
         A = ti.static(self.ALPHAS)
+        grav = ti.cast(self.forces.gravity[None], ti.f64)
         mass = ti.cast(m.mass[i], ti.f64)
         d = ti.cast(self.dv[i], ti.f64)
         base = ti.cast(self.dv_total[i], ti.f64)
@@ -560,7 +599,8 @@ class Implicit(Integrator):
         NA = ti.static(len(self.ALPHAS))
         hh = ti.cast(dt, ti.f64)
         gamma = ti.cast(fm.air_damping[None], ti.f64)
-        grav = ti.cast(fm.gravity[None], ti.f64)
+        # gravity is read inside the loops (_particle_potential): a float64 vector kept at kernel scope and read in a loop that al
+        # so sums float64 faults on CUDA (misaligned address, Taichi 1.7.4)
         for j in ti.static(range(NA + 2)):
             self.ip[j] = 0.0
         for j in ti.static(range(NA + 1)):
@@ -574,7 +614,7 @@ class Implicit(Integrator):
                 d = ti.cast(self.dv[i], ti.f64)
                 self.ip[NA + 1] -= ti.cast(self.b[i], ti.f64).dot(d)  # grad . dv (b = -S grad)
                 work += hh * ext.dot(ti.cast(self.v0[i] + self.dv_total[i], ti.f64) + d)
-                self._particle_potential(i, hh, gamma, grav, ext, 0, 2)
+                self._particle_potential(i, hh, gamma, ext, 0, 2)
         ti.loop_config(serialize=self.model.serial)
         for sp in range(m.n_springs[None]):
             self._spring_potential(sp, hh, 0, 2)
@@ -584,7 +624,7 @@ class Implicit(Integrator):
         for i in range(m.n_particles[None]):
             if shorter != 0 and m.inv_mass[i] != 0:
                 ext = ti.cast(fm.source_force(i, s.x[i], s.v[i]), ti.f64)
-                self._particle_potential(i, hh, gamma, grav, ext, 2, NA + 1)
+                self._particle_potential(i, hh, gamma, ext, 2, NA + 1)
         ti.loop_config(serialize=self.model.serial)
         for sp in range(m.n_springs[None]):
             if shorter != 0:
