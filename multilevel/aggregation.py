@@ -286,10 +286,12 @@ class AggregationMultigrid:
     def _prepare(self, u: ti.template(), axial: ti.template(), iso: ti.template(), mass: ti.template(),
                  inv_mass: ti.template(), contacts: ti.template(), with_contacts: ti.template(), mass_scale: ti.f64):
         ms = ti.cast(mass_scale, self.fp)
-        I3 = ti.Matrix.identity(self.fp, 3)
         # the cloth: D_i = S_i (M' + sum B_s) S_i + M' (I - S_i), O_s = -S_a B_s S_b
         ti.loop_config(serialize=self.serial)
         for i in range(self.vbound[1]):
+            # I3 in each loop, not at kernel scope: a float64 matrix kept there faulted on CUDA (misaligned
+            # address, Taichi 1.7.4)
+            I3 = ti.Matrix.identity(self.fp, 3)
             D = I3 * ti.cast(mass[i], self.fp) * ms
             for e in range(self.adj_ptr[i], self.adj_ptr[i + 1]):
                 q = self.adj_edge[e]
@@ -300,6 +302,7 @@ class AggregationMultigrid:
             self.diag[i] = Si @ D @ Si + mi - Si @ mi
         ti.loop_config(serialize=self.serial)
         for q in range(self.ebound[1]):
+            I3 = ti.Matrix.identity(self.fp, 3)
             uq = ti.cast(u[q], self.fp)
             B = ti.cast(axial[q], self.fp) * uq.outer_product(uq) + ti.cast(iso[q], self.fp) * I3
             a, b = self.end_a[q], self.end_b[q]

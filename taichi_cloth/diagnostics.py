@@ -89,9 +89,11 @@ class Diagnostics:
         motion = ti.cast(0.0, ti.f64)
         fast = 0
         free = 0
-        g = ti.cast(self.forces.gravity[None], ti.f64)
         ti.loop_config(serialize=self.model.serial)
         for i in range(m.n_particles[None]):
+            # gravity read in the loop: a float64 vector kept at kernel scope and read in a loop that also sums
+            # float64 faults on CUDA (misaligned address, Taichi 1.7.4)
+            g = ti.cast(self.forces.gravity[None], ti.f64)
             x = ti.cast(s.x[i], ti.f64)
             v = ti.cast(s.v[i], ti.f64)
             mass = ti.cast(m.mass[i], ti.f64)
