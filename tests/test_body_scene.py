@@ -68,6 +68,34 @@ def sewn_skirt(body_morph=None):
 
 
 @pytest.mark.slow
+def test_a_skirt_sewn_coarse_to_fine_follows_a_body_that_grows_through_its_level_switches():
+    """The body morph on a garment on 4-8 levels: sewn on level 1 of 3, the body grows (0.5 s) while the refiner
+    switches to levels 2 and 3; the collider ends as the fitted body, the seams stay closed, nothing is inside."""
+    from taichi_cloth.garment.levels import multilevel_garment
+
+    blend, gauge = default_body()
+    base_girths = gauge.measure(blend.base, names=["waist", "hips"])
+    fit = fit_body({"waist": base_girths["waist"] + 0.03, "hips": base_girths["hips"] + 0.05})
+    spec = load_garment(DEMOS / "garments" / "skirt.toml")
+    spec.spacing, spec.levels = 0.03, 3
+    scene = tc.Scene(multilevel_garment(spec), integrator="implicit", dt=1 / 120,
+                     integrator_options={"cg_tolerance": 1e-2}, air_damping=1.0, colliders=[dict(MANNEQUIN)],
+                     stretch_limit=dict(max_strain=0.1, iterations=20), sewing=dict(energy_tolerance=0.05),
+                     body_morph={"weights": fit.weights, "duration": 0.5}, multilevel=dict(max_time=0.2))
+    morph, refiner, sewing = scene.controller("body_morph"), scene.controller("refiner"), scene.controller("sewing")
+    while not (morph.done and refiner.at_finest) and scene.state.t < 3.0:
+        scene.run(6, progress=False)
+    assert morph.done and refiner.at_finest and len(refiner.switches) == 3  # the start level, 2 and 3
+    switched = [s.t for s in refiner.switches[1:]]
+    assert any(morph.begin < t < morph.begin + 0.5 for t in switched), (morph.begin, switched)  # while it grows
+    scene.run(12, progress=False)
+    np.testing.assert_array_equal(scene.controller("colliders").objects[0].vertices_np, fit.vertices)
+    assert sewing.gaps().max() == 0.0
+    assert scene.model.data.n_particles == scene.controller("refiner").cloth.levels[2].n_particles
+    assert garment_quality(scene).penetrations == 0
+
+
+@pytest.mark.slow
 def test_skirt_follows_a_body_that_grows_during_the_drape():
     blend, gauge = default_body()
     base_girths = gauge.measure(blend.base, names=["waist", "hips"])
