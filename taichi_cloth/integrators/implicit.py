@@ -93,9 +93,9 @@ class Implicit(Integrator):
     #: 198 = the cap). Below it the cycle's kernels cost more to compile (about 6 s) than they save.
     AGGREGATION_FROM = 2000
     #: whether `auto` preconditions a garment by V-cycles over its own 4-8 levels once its seams are merged. No:
-    #: over a run to rest on a 2-core CPU, the demo T-shirt on 5 levels (1,370 particles) took 58 CG iterations
-    #: per step over them against Jacobi's 95 but 28.8 ms per step against 16.8; on 6 levels (2,512) 79 against
-    #: 117 but 56 ms against 20 (its contacts are outside the rediscretised coarse levels). "multigrid" asks for it.
+    #: over a run to rest on a 2-core CPU, the demo T-shirt on 5 levels (1,370 particles) took 29 CG iterations
+    #: per step over them against Jacobi's 96 but 27.8 ms per step against 14.3 (on its finest level 11.5 against
+    #: 8.7: a cycle costs four Jacobi iterations, the coarsest factor 0.9 ms). "multigrid" asks for it.
     GARMENT_LEVELS = False
     #: CG iterations unrolled into one kernel launch; iterations past convergence inside a chunk are no-ops
     CHUNK = 8
@@ -228,7 +228,8 @@ class Implicit(Integrator):
                        1.0 + dt * self.forces.air_damping_value)
         else:
             mg.prepare(self.state.x, self.model.inv_mass, dt, self.forces.air_damping_value,
-                       self.contacts.stuck if self.has_contacts else None)
+                       self.contacts.stuck if self.has_contacts else None,
+                       self.contacts.normal if self.has_contacts else None)
 
     # ------------------------------------------------------------------ the step
     def _advance(self, dt: float) -> None:
@@ -599,8 +600,8 @@ class Implicit(Integrator):
         NA = ti.static(len(self.ALPHAS))
         hh = ti.cast(dt, ti.f64)
         gamma = ti.cast(fm.air_damping[None], ti.f64)
-        # gravity is read inside the loops (_particle_potential): a float64 vector kept at kernel scope and read in a loop that al
-        # so sums float64 faults on CUDA (misaligned address, Taichi 1.7.4)
+        # gravity is read inside the loops (_particle_potential): a float64 vector kept at kernel scope and read in
+        # a loop that also sums float64 faults on CUDA (misaligned address, Taichi 1.7.4)
         for j in ti.static(range(NA + 2)):
             self.ip[j] = 0.0
         for j in ti.static(range(NA + 1)):
