@@ -107,7 +107,8 @@ def test_multigrid_and_jacobi_give_the_same_step_and_multigrid_needs_far_fewer_i
 
 def test_a_v_cycle_is_symmetric_and_positive_on_the_free_rows():
     """CG needs a symmetric positive definite preconditioner: z = V(r) is linear, <V r1, r2> = <r1, V r2>, and
-    <V r, r> > 0 on the free rows (the pinned ones, and the ones static friction holds, come out 0)."""
+    <V r, r> > 0 on the free rows (the pinned ones, and the ones static friction holds, come out 0; a sliding
+    contact's row has no component along its normal)."""
     sc = sheet_on_a_ball("multigrid")
     mg = sc.integrator.multigrid
     mg.prepare(sc.state.x, sc.model.inv_mass, H, GAMMA)
@@ -120,6 +121,14 @@ def test_a_v_cycle_is_symmetric_and_positive_on_the_free_rows():
     mg.prepare(sc.state.x, sc.model.inv_mass, H, GAMMA, sc.state.contacts.stuck)
     z1 = assert_symmetric_positive(mg, np.random.default_rng(5), free & ~stuck)
     assert np.abs(z1[~free | stuck]).max() == 0
+    # and a sliding contact's normal is left out: the cycle's output has no component along it
+    n = sc.state.contacts.normal.to_numpy()[: sc.model.data.n_particles]
+    sliding = free & ~stuck & (np.linalg.norm(n, axis=1) > 0)
+    assert sliding.sum() >= 4
+    mg.prepare(sc.state.x, sc.model.inv_mass, H, GAMMA, sc.state.contacts.stuck, sc.state.contacts.normal)
+    z1 = assert_symmetric_positive(mg, np.random.default_rng(6), free & ~stuck)
+    along = np.einsum("ij,ij->i", z1[sliding], n[sliding]) / np.linalg.norm(n[sliding], axis=1)
+    assert np.abs(along).max() <= 1e-12 * np.abs(z1).max() and np.abs(z1[sliding]).max() > 0
 
 
 def assert_symmetric_positive(mg, rng, rows) -> np.ndarray:
