@@ -65,8 +65,9 @@ def copies(levels: list[Level]) -> list[np.ndarray]:
         live = (lv.parents >= 0) & (lv.weights != 0)
         single = (live.sum(1) == 1) & live[:, 0] & (lv.weights[:, 0] == 1.0)
         copy = np.full(prev.n_vertices, -1, np.int64)
-        fine = np.nonzero(single)[0][::-1]  # the first copy wins where there are several
-        copy[lv.parents[fine, 0]] = fine
+        fine = np.nonzero(single)[0]
+        coarse, first = np.unique(lv.parents[fine, 0], return_index=True)  # the first copy where there are several
+        copy[coarse] = fine[first]
         if (copy < 0).any():
             raise ValueError(f"level {l + 1} has {int((copy < 0).sum())} vertices without a copy on level {l + 2}: "
                              "the spring multigrid needs nested levels")
