@@ -19,8 +19,8 @@ A V(nu, nu) cycle (the preconditioner, symmetric as CG needs):
     hierarchy's tables, applied to each component;
   * the coarsest level is solved exactly: its 3 n0 x 3 n0 matrix is assembled and factored (Cholesky, float64)
     once per step, in one thread (n0 = 25 for the usual 4 x 4 base: about 0.1 ms);
-  * contacts, on the simulated level: a particle that static friction holds this step is fixed as a pin is
-    (`held`), and a sliding one (`normal`) has its smoother block, its residual and its coarse correction
+  * contacts, on the simulated level: a particle that static friction holds this step is fixed as a pin is,
+    and a sliding one has its smoother block, its residual and its coarse correction
     filtered (S = I - n n^T: the block S D S + m'(I - S)), so that the cycle smooths the filtered system CG
     solves; the 4-8 T-shirt draped on the mannequin, averaged over a run to rest: 156 CG iterations per step
     without either (Jacobi while its pieces were apart), 44 with the held ones, 29 with both (aggregation then);
@@ -187,8 +187,6 @@ class SpringMultigrid:
         self.mass_scale = blk.scalar(fp, ())              # 1 + h gamma of the current step
         self.level = blk.scalar(ti.i32, ())               # the active level
         self.weight = blk.scalar(fp, ())                  # omega
-        self.no_hold = blk.scalar(ti.i32, N)              # zeros: `held` when prepare is given none
-        self.no_normal = blk.vector(3, fp, N)             # zeros: `normal` when prepare is given none
         self.nrm = blk.vector(3, fp, N)                   # unit normal of a sliding contact (simulated level), or 0
         blk.finalize(self)
         self.omega = float(omega)
@@ -238,17 +236,16 @@ class SpringMultigrid:
         self._omega = float(value)
         self.weight[None] = self._omega
 
-    def prepare(self, x, inv_mass, h: float, gamma: float, held=None, normal=None) -> None:
+    def prepare(self, x, inv_mass, h: float, gamma: float, contacts=None) -> None:
         """Once per step, before the cycles: the springs' directions and coefficients at the positions x (the
         simulated level's (P,) vec3 field [m]), the pins (where inv_mass, its (P,) field, is 0, and their
         parents), the block inverses and the coarsest factor, for the step h [s] and the air drag gamma [1/s].
-        held: an optional (P,) i32 field, nonzero where a particle is fixed this step as a pin is (contacts that
-        static friction holds); normal: an optional (P,) vec3 field, a sliding contact's normal (0: none), whose
-        direction the cycle leaves out on the simulated level (its smoother and its transfers work on the
-        filtered system there). One kernel launch."""
-        self._prepare(x, inv_mass, held if held is not None else self.no_hold,
-                      normal if normal is not None else self.no_normal, float(h), float(h * gamma),
-                      int(self.spring_offsets[self._active + 1]))
+        contacts: the particles' contacts (taichi_cloth.contacts.Contacts: `stuck`, `normal`; None without
+        colliders): one that static friction holds is fixed this step as a pin is, a sliding one's normal is left
+        out on the simulated level (its smoother and its transfers work on the filtered system there), as
+        multilevel.aggregation's prepare takes them. One kernel launch."""
+        self._prepare(x, inv_mass, contacts if contacts is not None else inv_mass, int(contacts is not None),
+                      float(h), float(h * gamma), int(self.spring_offsets[self._active + 1]))
 
     def apply(self, r, z) -> None:
         """z = V-cycle(r) on the active level: r, z are (P,) vec3 fields of the simulated level [kg m/s], [m/s]
@@ -290,8 +287,8 @@ class SpringMultigrid:
 
     # ------------------------------------------------------------------ the kernels
     @ti.kernel
-    def _prepare(self, x: ti.template(), inv_mass: ti.template(), held: ti.template(), normal: ti.template(),
-                 h: ti.f64, h_gamma: ti.f64, n_springs: ti.i32):
+    def _prepare(self, x: ti.template(), inv_mass: ti.template(), contacts: ti.template(),
+                 with_contacts: ti.template(), h: ti.f64, h_gamma: ti.f64, n_springs: ti.i32):
         L = ti.static(self.n_levels)
         hh = ti.cast(h, self.fp)
         mass_scale = 1.0 + ti.cast(h_gamma, self.fp)
@@ -323,12 +320,17 @@ class SpringMultigrid:
             ti.loop_config(serialize=ti.static(self.sizes[l] < self.serial_below))
             for i in range(self._count(l)):
                 g = ti.static(int(self.offsets[l])) + i
-                self.pin[g] = ti.select((l == active) & ((inv_mass[i] == 0) | (held[i] != 0)), 1, 0)
+                fixed = 0
                 nrm = ti.Vector.zero(self.fp, 3)
                 if l == active:
-                    n = ti.cast(normal[i], self.fp)
-                    if n.dot(n) > 0:
-                        nrm = n / n.norm()
+                    fixed = ti.select(inv_mass[i] == 0, 1, 0)
+                    if ti.static(with_contacts):
+                        if contacts.stuck[i] != 0:
+                            fixed = 1
+                        n = ti.cast(contacts.normal[i], self.fp)
+                        if n.dot(n) > 0:
+                            nrm = n / n.norm()
+                self.pin[g] = fixed
                 self.nrm[g] = nrm
         for k in ti.static(range(L - 1)):
             l = ti.static(L - 1 - k)  # from the finest down: level l marks the parents on level l - 1

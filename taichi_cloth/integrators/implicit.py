@@ -165,20 +165,15 @@ class Implicit(Integrator):
             levels, [d.springs for d in cloth_levels], [d.stiffness for d in cloth_levels],
             [d.damping for d in cloth_levels], [d.rest_length for d in cloth_levels], [d.mass for d in cloth_levels],
             fp=self.model.fp, viscous=[d.viscous_damping() for d in cloth_levels],
-            serial_below=self._serial_below(SERIAL_BELOW))
+            # every loop serial for a cloth the CPU runs serially; on a GPU none (the CPU's threshold ran every loop
+            # in one GPU thread: an H100 took 170 ms per step, 4.7 V-cycles, on a 65 x 65 sheet)
+            serial_below=1 << 62 if self.model.serial else
+            (SERIAL_BELOW if ti.lang.impl.current_cfg().arch == ti.cpu else 0))
         self.starts_off_levels = level is None
         if level is not None:
             self.level_multigrid.set_active_level(level)
             self.multigrid = self.level_multigrid
             self.warm[None] = 0
-
-    def _serial_below(self, cpu_threshold: int) -> int:
-        """The level size below which the 4-8 cycle runs a loop in one thread: every loop for a cloth the CPU runs
-        serially, the measured threshold on the CPU, none on a GPU (where the CPU's threshold ran every loop in one
-        GPU thread: an H100 took 170 ms per step, 4.7 V-cycles, on a 65 x 65 sheet that way)."""
-        if self.model.serial:
-            return 1 << 62
-        return cpu_threshold if ti.lang.impl.current_cfg().arch == ti.cpu else 0
 
     def attach_aggregation(self) -> None:
         """Build the multigrid preconditioner over aggregates of the cloth's particles (multilevel.aggregation),
@@ -228,8 +223,7 @@ class Implicit(Integrator):
                        1.0 + dt * self.forces.air_damping_value)
         else:
             mg.prepare(self.state.x, self.model.inv_mass, dt, self.forces.air_damping_value,
-                       self.contacts.stuck if self.has_contacts else None,
-                       self.contacts.normal if self.has_contacts else None)
+                       self.contacts if self.has_contacts else None)
 
     # ------------------------------------------------------------------ the step
     def _advance(self, dt: float) -> None:
