@@ -6,8 +6,7 @@ multigrid solver.
   outline     the same for an arbitrary pattern outline: a 4-8 interior and a re-triangulated boundary band
   prolong     the Taichi kernel that refills positions and velocities on a refined level, in place
   multigrid   V-cycles over the levels for the approximate implicit system (Jacobi smoother)
-  spring_multigrid  V-cycles over nested 4-8 levels for the implicit (Baraff-Witkin) spring system
-  aggregation V-cycles over levels made by aggregating particles, for the same system on any cloth
+(The implicit step's preconditioners, over these levels or over aggregates, are taichi_cloth.linear's.)
 
 Works on plain Taichi fields and numpy arrays and does not import taichi_cloth, so it can be tested alone;
 taichi_cloth.Scene composes it when a scene's cloth is a multilevel one ([multilevel] in a scene file).

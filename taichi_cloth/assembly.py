@@ -21,6 +21,7 @@ from .contacts import Contacts
 from .errors import SceneError
 from .forces import ForceModel
 from .integrators import integrator_class
+from .linear import NestedLevels
 from .model import Model, State
 from .pins import Pins, PinSpec, pinned_mask
 from .rest import RestCriterion
@@ -238,47 +239,25 @@ def _check_step_options(dt, adaptive, fps, step_guard) -> bool:
 
 
 def _attach_levels(stepper, integrator: str, source: _Source, multilevel, specs, notes: list) -> None:
-    """Give an integrator that asks for them the cloth's 4-8 levels (nested ones: global refinement). One that
-    cannot do without them refuses the scene; the implicit integrator's multigrid preconditioner builds levels by
-    aggregation instead (asked for by name, or on a cloth of at least its AGGREGATION_FROM particles), or falls back
-    to Jacobi (and says so when it was asked for by name). A garment's levels serve only a preconditioner asked for
-    by name ("multigrid"; `auto` keeps aggregation or Jacobi, see Implicit.GARMENT_LEVELS); its pieces are apart on
-    none of them until their seams merge on the start level: the levels are attached for then, and aggregation
-    serves before."""
+    """Give an integrator that asks for them the cloth's nested 4-8 levels (linear.NestedLevels; None and the reason
+    where it has none: no multilevel cloth, or local refinement): it decides what it makes of them (the implicit
+    step: linear.policy). Its ValueError refuses the scene; a note it returns goes into the run's warnings."""
     ml = source.multilevel
-    garment = source.garment is not None
     why = None
     if ml is None:
         why = "needs a multilevel cloth ([multilevel] in a scene file, ClothBuilder.multilevel_grid in Python)"
     elif (multilevel or {}).get("refine") == "local":
         why = "needs the nested levels of global refinement, not refine = local"
-    elif garment and getattr(stepper, "levels_required", True):
-        why = "cannot sew a garment: its pieces apart are on none of its 4-8 levels"
-    elif garment and not (stepper.options.get("preconditioner") == "multigrid" or stepper.GARMENT_LEVELS):
-        why = "is used on a garment's levels only when asked for by name"
-    attached = False
-    if why is None:
-        try:
-            stepper.attach_levels(ml.hierarchy.levels, ml.levels, [pinned_mask(specs, d.positions) for d in ml.levels],
-                                  None if garment else ml.start_level)
-            attached = True
-        except ValueError as err:  # e.g. a coarsest level too large for its dense factorisation
-            why = str(err)
-    if attached and not garment:
-        return
-    if getattr(stepper, "levels_required", True):
-        raise SceneError(f"integrator {integrator!r} with multigrid_cycles {why}")
-    if stepper.options.get("preconditioner") == "multigrid" or \
-            stepper.model.data.n_particles >= stepper.AGGREGATION_FROM:
-        try:  # levels of its own, by aggregation
-            stepper.attach_aggregation()
-            return
-        except ValueError as err:
-            why = f"{why}, and aggregation failed: {err}"
-    if stepper.options.get("preconditioner") == "multigrid" and not attached:
-        msg = f"the multigrid preconditioner {why}; integrator {integrator!r} uses Jacobi instead"
-        notes.append(msg)
-        warn(msg)
+    garment = source.garment is not None
+    nested = None if why else NestedLevels(ml.hierarchy.levels, ml.levels,
+                                           [pinned_mask(specs, d.positions) for d in ml.levels],
+                                           None if garment else ml.start_level, garment)
+    try:
+        note = stepper.attach_levels(nested, why)
+    except ValueError as err:
+        raise SceneError(f"integrator {integrator!r} {err}") from None
+    if note:
+        notes.append(note)
 
 
 def _sewing(model, state, forces, garment, options: dict | None, levels=None):

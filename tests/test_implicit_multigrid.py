@@ -1,6 +1,6 @@
-"""The implicit integrator's multigrid preconditioner (multilevel.spring_multigrid): a multigrid-preconditioned CG
-solve equals a direct sparse solve of the same filtered Newton system of backward Euler (scipy, float64), with pins
-and with contacts; it equals the Jacobi-preconditioned step; a V-cycle is the symmetric operator CG needs; the scene
+"""The implicit integrator's multigrid preconditioners (taichi_cloth.linear.level_cycle, .aggregation): a
+multigrid-preconditioned CG solve equals a direct sparse solve of the same filtered Newton system of backward Euler
+(scipy, float64), with pins and with contacts; it equals the Jacobi-preconditioned step; a V-cycle is the symmetric operator CG needs; the scene
 picks the preconditioner the cloth allows and says which."""
 import numpy as np
 import pytest
@@ -8,7 +8,9 @@ import taichi as ti
 
 import taichi_cloth as tc
 from conftest import current_level, damping_matrix, spring_forces
-from multilevel.aggregation import AggregationMultigrid
+from taichi_cloth.linear import ConstraintFilter
+from taichi_cloth.linear.aggregation import AggregationMultigrid
+from taichi_cloth.linear.level_cycle import copies
 from taichi_cloth.multilevel_cloth import multilevel_grid
 from taichi_cloth.stability import stiffness_matrix
 
@@ -89,7 +91,7 @@ def test_a_step_equals_the_direct_solve_of_the_filtered_system(preconditioner):
     v = sc.velocities()
     solve_after_friction(sc)
     np.testing.assert_allclose(sc.velocities() - v, expected, rtol=0, atol=1e-9 * np.abs(expected).max())
-    assert (sc.integrator.multigrid is not None) == (preconditioner == "multigrid")
+    assert (sc.integrator.policy.current is not sc.integrator.policy.jacobi) == (preconditioner == "multigrid")
 
 
 def test_multigrid_and_jacobi_give_the_same_step_and_multigrid_needs_far_fewer_iterations():
@@ -110,8 +112,10 @@ def test_a_v_cycle_is_symmetric_and_positive_on_the_free_rows():
     <V r, r> > 0 on the free rows (the pinned ones, and the ones static friction holds, come out 0; a sliding
     contact's row has no component along its normal)."""
     sc = sheet_on_a_ball("multigrid")
-    mg = sc.integrator.multigrid
-    mg.prepare(sc.state.x, sc.model.inv_mass, H, GAMMA)
+    mg = sc.integrator.policy.current
+    system = sc.integrator.system
+    system.set_step(H, GAMMA)
+    mg.prepare(system, ConstraintFilter(sc.model))
     free = ~sc.model.pinned
     z1 = assert_symmetric_positive(mg, np.random.default_rng(5), free)
     assert np.abs(z1[~free]).max() == 0
@@ -122,7 +126,7 @@ def test_a_v_cycle_is_symmetric_and_positive_on_the_free_rows():
     n = sc.state.contacts.normal.to_numpy()[: sc.model.data.n_particles]
     sliding = free & ~stuck & (np.linalg.norm(n, axis=1) > 0)
     assert sliding.sum() >= 4
-    mg.prepare(sc.state.x, sc.model.inv_mass, H, GAMMA, sc.state.contacts)
+    mg.prepare(system, sc.integrator.filter)
     z1 = assert_symmetric_positive(mg, np.random.default_rng(6), free & ~stuck)
     assert np.abs(z1[~free | stuck]).max() == 0
     along = np.einsum("ij,ij->i", z1[sliding], n[sliding]) / np.linalg.norm(n[sliding], axis=1)
@@ -151,14 +155,14 @@ def assert_symmetric_positive(mg, rng, rows) -> np.ndarray:
 def test_the_scene_picks_the_preconditioner_the_cloth_allows_and_says_which():
     ml = tc.Scene(multilevel_grid((0.5, 0.5), (2, 2), 3, "cotton", center=(0, 1, 0)), dt=H,
                   multilevel={"refine": False})
-    assert ml.integrator.multigrid is not None and "V-cycles over 3 4-8 levels" in ml.run(1, progress=False).format()
+    assert ml.integrator.policy.current is ml.integrator.policy.levels and "V-cycles over 3 4-8 levels" in ml.run(1, progress=False).format()
     grid = tc.Scene(tc.ClothBuilder.grid((0.5, 0.5), (6, 6)), dt=H)
-    assert grid.integrator.multigrid is None and "Jacobi-preconditioned CG" in grid.run(1, progress=False).format()
+    assert grid.integrator.policy.current is grid.integrator.policy.jacobi and "Jacobi-preconditioned CG" in grid.run(1, progress=False).format()
     big = tc.Scene(tc.ClothBuilder.grid((1.0, 1.0), (45, 45)), dt=H)  # 2,025 particles: auto aggregates
-    assert isinstance(big.integrator.multigrid, AggregationMultigrid)
+    assert isinstance(big.integrator.policy.current, AggregationMultigrid)
     assert big.integrator.detail.startswith("CG preconditioned by V-cycles over 3 aggregation levels (2025 > ")
     asked = tc.Scene(tc.ClothBuilder.grid((0.5, 0.5), (6, 6)), dt=H, integrator_options={"preconditioner": "multigrid"})
-    assert isinstance(asked.integrator.multigrid, AggregationMultigrid)
+    assert isinstance(asked.integrator.policy.current, AggregationMultigrid)
     assert "V-cycles over 2 aggregation levels (36 > 4)" in asked.run(1, progress=False).format()
     # 300 loose threads of one spring each: aggregated into 300 single vertices that do not coarsen further
     x = np.stack([np.repeat(np.arange(300) * 0.02, 2), np.zeros(600), np.tile([0.0, 0.01], 300)], 1)
@@ -167,7 +171,7 @@ def test_the_scene_picks_the_preconditioner_the_cloth_allows_and_says_which():
                            np.full(300, int(tc.SpringKind.STRUCTURAL)))
     with pytest.warns(UserWarning, match="aggregation failed: aggregation stopped at 300 vertices"):
         loose = tc.Scene(threads, dt=H, integrator_options={"preconditioner": "multigrid"})
-    assert loose.integrator.multigrid is None and any("uses Jacobi instead" in w for w in loose.warnings)
+    assert loose.integrator.policy.current is loose.integrator.policy.jacobi and any("uses Jacobi instead" in w for w in loose.warnings)
     with pytest.raises(tc.SceneError, match="preconditioner"):
         tc.load_scene({"cloth": {"grid": {"size": [0.5, 0.5], "resolution": [4, 4]}},
                        "integrator": {"name": "implicit", "dt": 0.01, "preconditioner": "ilu"}})
@@ -184,7 +188,7 @@ def test_the_preconditioner_follows_level_switches_without_compiling():
             sc.apply(sc.controller("refiner").refine())
             sc.step(3)
     assert cc.total == 0, cc.compiled
-    assert current_level(sc) == 3 and sc.integrator.multigrid.active == 3
+    assert current_level(sc) == 3 and sc.integrator.policy.current.active == 3
     assert sc.check().max_strain < 0.05
 
 
@@ -219,11 +223,11 @@ def test_a_step_of_a_sewn_garment_equals_the_direct_solve(preconditioner):
     assert n == 2 * 11 * 11 - 11 and sc.model.pinned.sum() == 21
     touching = np.linalg.norm(sc.state.contacts.normal.to_numpy()[:n], axis=1) > 0
     assert 4 < touching.sum() < n - 10, touching.sum()
-    mg = sc.integrator.multigrid
+    mg = sc.integrator.policy.current
     if preconditioner == "multigrid":
         assert isinstance(mg, AggregationMultigrid) and len(mg.sizes) >= 2, sc.integrator.detail
     else:
-        assert mg is None
+        assert mg is sc.integrator.policy.jacobi
     expected = filtered_solve(sc)
     v = sc.velocities()
     solve_after_friction(sc)
@@ -235,11 +239,11 @@ def test_an_aggregation_v_cycle_is_symmetric_and_positive_and_its_levels_are_gal
     P^T A~ P of the level above (P the aggregates' piecewise-constant prolongation): checked on the sewn pair
     against the blocks of the filtered operator A~ = S A S + M' (I - S) built here."""
     sc = sewn_pair_on_a_ball("multigrid")
-    mg = sc.integrator.multigrid
     integ = sc.integrator
-    integ._assemble(H, 1e-6, 10, 1)  # the Newton system's springs at the current state
-    mg.prepare(integ.spring_u, integ.spring_axial, integ.spring_iso, sc.model.mass, sc.model.inv_mass,
-               sc.state.contacts, 1 + H * GAMMA)
+    mg = integ.policy.current
+    integ.system.set_step(H, GAMMA)
+    integ._assemble(H, H * GAMMA, 1)  # the Newton system's springs at the current state
+    mg.prepare(integ.system, integ.filter)
     n = sc.model.data.n_particles
     assert_symmetric_positive(mg, np.random.default_rng(7), np.ones(n, bool))  # every row: A~ has no zero rows
 
@@ -291,7 +295,7 @@ def test_aggregation_levels_follow_the_seam_merge_without_compiling():
     sc = tc.Scene(g, dt=1 / 240, gravity=(0, 0, 0), sewing=dict(close_speed=0.5, epsilon=0.002),
                   integrator_options={"preconditioner": "multigrid"})
     sc.run(2, progress=False)
-    mg = sc.integrator.multigrid
+    mg = sc.integrator.policy.current
     assert mg.sizes[0] == g.data.n_particles
     with tc.CompileCounter() as cc:
         sc.run(58, progress=False)
@@ -306,9 +310,8 @@ def test_a_garment_on_its_4_8_levels_uses_them_once_merged_and_a_step_equals_the
     """One hierarchy, two uses: a garment sewn coarse to fine (taichi_cloth.garment.levels) is preconditioned by
     V-cycles over the same levels the refiner switches between, from the seam merge on (its pieces apart are on no
     level: aggregation levels before). Its levels are nested by their tables, not by index
-    (multilevel.spring_multigrid.copies), and a step on level 2 of 3 equals the direct solve of the filtered system.
+    (taichi_cloth.linear.level_cycle.copies), and a step on level 2 of 3 equals the direct solve of the filtered system.
     `auto` keeps Jacobi on a garment this small."""
-    from multilevel.spring_multigrid import copies
     from taichi_cloth.garment.levels import multilevel_garment
     from test_multilevel_garment import SPHERE, two_squares
 
@@ -317,14 +320,14 @@ def test_a_garment_on_its_4_8_levels_uses_them_once_merged_and_a_step_equals_the
                   integrator_options={"preconditioner": "multigrid", "cg_tolerance": 1e-12, "cg_max_iterations": 2000,
                                       "newton_iterations": 1, "line_search": False})
     integ, sewing = sc.integrator, sc.controller("sewing")
-    levels, apart = integ.level_multigrid, integ.multigrid
+    levels, apart = integ.policy.levels, integ.policy.current
     assert isinstance(apart, AggregationMultigrid) and levels.n_levels == 3  # the pieces apart (242 particles)
     assert any(not np.array_equal(c, np.arange(len(c))) for c in copies(mg.cloth.hierarchy.levels))
     frames = 0
     while not sewing.joined and frames < 60:
         sc.run(1, progress=False)
         frames += 1
-    assert sewing.joined and integ.multigrid is levels and levels.active == 0
+    assert sewing.joined and integ.policy.current is levels and levels.active == 0
     assert "V-cycles over 3 4-8 levels once on them (before: aggregation levels)" in integ.detail
     sc.apply(sc.controller("refiner").refine())
     assert levels.active == 1 and sc.model.data.n_particles == mg.levels[1].merged.n_particles
@@ -336,7 +339,8 @@ def test_a_garment_on_its_4_8_levels_uses_them_once_merged_and_a_step_equals_the
     v = sc.velocities()
     solve_after_friction(sc)
     np.testing.assert_allclose(sc.velocities() - v, expected, rtol=0, atol=1e-9 * np.abs(expected).max())
-    levels.prepare(sc.state.x, sc.model.inv_mass, H, GAMMA)
+    integ.system.set_step(H, GAMMA)
+    levels.prepare(integ.system, ConstraintFilter(sc.model))
     assert_symmetric_positive(levels, np.random.default_rng(11), np.ones(n, bool))
     # level 1's springs point where their ends' copies on level 2 (simulated) are
     copy = copies(mg.cloth.hierarchy.levels)[0]
@@ -346,6 +350,6 @@ def test_a_garment_on_its_4_8_levels_uses_them_once_merged_and_a_step_equals_the
     d = sc.positions()[copy[ends[:, 1]]] - sc.positions()[copy[ends[:, 0]]]
     np.testing.assert_allclose(levels.u.to_numpy()[:s0], d / np.linalg.norm(d, axis=1, keepdims=True), atol=1e-12)
     sc.reset()  # the pieces apart again: off the levels
-    assert integ.multigrid is apart and sc.model.data.n_particles == mg.garment.data.n_particles
+    assert integ.policy.current is apart and sc.model.data.n_particles == mg.garment.data.n_particles
     small = tc.Scene(mg, dt=H, colliders=[SPHERE])
-    assert small.integrator.level_multigrid is None and small.integrator.multigrid is None
+    assert small.integrator.policy.levels is None and small.integrator.policy.current is small.integrator.policy.jacobi

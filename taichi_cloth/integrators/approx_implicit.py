@@ -85,7 +85,6 @@ class ApproxImplicit(Integrator):
         self.dv.fill(0)
 
     # ------------------------------------------------------------------ multigrid (multilevel cloths only)
-    #: Scene calls attach_levels when this is True (a multilevel cloth is required)
     def unstable_advice(self) -> str | None:
         if self.options["sweeps"] > 2 and not self.options["jv_term"]:
             return "more than 2 sweeps need jv_term = true"
@@ -95,15 +94,22 @@ class ApproxImplicit(Integrator):
     def needs_levels(self) -> bool:
         return self.options["multigrid_cycles"] > 0
 
-    def attach_levels(self, levels, cloth_levels, pinned, level: int) -> None:
-        """Build the multigrid solver over a 4-8 hierarchy: `levels` (multilevel Level list), `cloth_levels`
-        (ClothData per level: masses, springs, spring constants), `pinned` ((n_l,) bool per level) and the
-        current level (0-based)."""
+    def attach_levels(self, nested, why: str | None) -> None:
+        """Build the multigrid solver over the cloth's nested 4-8 levels (linear.NestedLevels: the hierarchy's
+        levels, ClothData and pins per level, the current level). ValueError where there are none (`why` says why)
+        or the cloth is a garment."""
         from multilevel.multigrid import LevelOperator, MultigridSolver
 
-        ops = [LevelOperator(d.mass, d.springs, d.stiffness, p) for d, p in zip(cloth_levels, pinned)]
-        self.multigrid = MultigridSolver(levels, ops, fp=self.model.fp)
-        self.multigrid.set_active_level(level)
+        if nested is not None and nested.garment:
+            why = "cannot sew a garment: its pieces apart are on none of its 4-8 levels"
+        try:
+            if why is not None:
+                raise ValueError(why)
+            ops = [LevelOperator(d.mass, d.springs, d.stiffness, p) for d, p in zip(nested.cloth, nested.pinned)]
+            self.multigrid = MultigridSolver(nested.hierarchy, ops, fp=self.model.fp)
+        except ValueError as err:
+            raise ValueError(f"with multigrid_cycles {err}") from None
+        self.multigrid.set_active_level(nested.start)
 
     def topology_changed(self, level: int | None = None) -> None:
         self.reset()

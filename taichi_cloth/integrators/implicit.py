@@ -16,35 +16,17 @@ exactly at the backward-Euler step. Newton iteration k, from v_k (x_k = x0 + h v
 except the first (v_0 = v0), which linearises f(x0 + h v0) about x0: A = A(x0), b = h (f0 - h K(x0) v0), the
 classical one-solve step of Baraff and Witkin (equal to Newton's first iteration from v = 0);
 
-per spring (u = unit direction, l = length, L0 = rest length):
-    K_s = k [ u u^T + max(0, 1 - L0/l) (I - u u^T) ]   (stiffness; the clamp keeps A SPD, Choi and Ko 2002)
-    D_s = kd u u^T + c I                               (spring damping, viscous dashpot)
-so (A q)_i = m_i (1 + h gamma) q_i + sum_s [ (h kd + h^2 k (1-g)) u (u.dq) + (h^2 k g + h c) dq ], dq = q_i - q_j,
-evaluated matrix-free with a per-particle gather. Then a line search: IP at v_k + alpha dv for alpha = 1, 1/2, 1/4,
-1/8 in one kernel, the largest alpha with IP(v_k + alpha dv) <= IP(v_k) + 1e-4 alpha grad.dv is taken (on the
-device: no host read-back). One Newton iteration with alpha = 1 is the classical one-solve-per-step implicit
+with K and D the spring stiffness and damping Jacobians. The system, its constraint filter, the preconditioned CG
+and its preconditioners are taichi_cloth.linear's (linear.system writes the spring blocks, linear.policy picks the
+preconditioner of option `preconditioner`: auto | jacobi | multigrid). Then a line search: IP at v_k + alpha dv
+for alpha = 1, 1/2, 1/4, 1/8 in one kernel, the largest alpha with IP(v_k + alpha dv) <= IP(v_k) + 1e-4 alpha
+grad.dv is taken (on the device: no host read-back). One Newton iteration with alpha = 1 is the classical one-solve-per-step implicit
 Euler; the line search is what keeps large steps from gaining energy (one linearised solve overshoots a spring
 that rotates, and at 1/30 s a sheet dropped on a ball gained 4 x its weight x size of energy).
 
 Pinned particles are filtered out of the solve (BW98 section 5.3, S_i = 0), and a particle in contact with a
 collider in the last step has its normal component filtered (S_i = I - n n^T: its normal velocity does not
 change in the solve, the collider handles it).
-
-Preconditioners (option `preconditioner`):
-  jacobi     the 3x3 diagonal blocks of S A S + M'(I - S) (block Jacobi), inline in the CG kernels, CHUNK
-             iterations per launch; CG starts from the last step's velocity change;
-  multigrid  a V(1,1) cycle per CG iteration, applied as z = S V(S r), which keeps the preconditioner symmetric on
-             the free subspace: over the cloth's nested 4-8 levels where it has them (multilevel.spring_multigrid:
-             the same system rediscretised on every level; a garment's levels once its seams are merged, the ones
-             its refiner switches between), else over levels made by aggregating neighbouring
-             particles (multilevel.aggregation: Galerkin coarse operators of the filtered system; any cloth, a
-             sewn garment or a mesh file);
-  auto       (the default) multigrid over 4-8 levels where the cloth has them (not a garment's: GARMENT_LEVELS),
-             over aggregates on a cloth of at least AGGREGATION_FROM particles, else jacobi. The run summary names
-             the one used.
-CG stops when sqrt(r.z / b.z_b) <= cg_tolerance (z = the preconditioned residual: D^-1 r, or the V-cycle's; z_b the
-preconditioned b, so that a warm start that begins close stops early) or after cg_max_iterations. (A test on |r|
-alone stopped multigrid-CG at bad points: twice the error at a tolerance of 0.1.)
 """
 
 import math
@@ -53,11 +35,9 @@ import taichi as ti
 
 from clothbase.errors import warn
 from clothbase.fields import FieldBlock
-from multilevel.aggregation import AggregationMultigrid
 
+from ..linear import PCG, PRECONDITIONERS, BlockSystem, ConstraintFilter, PreconditionerPolicy
 from .base import Integrator, Option, at_least_one, one_of, positive
-
-PRECONDITIONERS = ("auto", "jacobi", "multigrid")
 
 
 @ti.data_oriented
@@ -87,34 +67,17 @@ class Implicit(Integrator):
     ALPHAS = (1.0, 0.5, 0.25, 0.125)
     ARMIJO = 1e-4
 
-    #: `auto` aggregates a cloth without 4-8 levels from this many particles. Measured (CG to 1e-3, 2-core CPU):
-    #: the T-shirt (1,464 particles) 7.4 ms per step against Jacobi's 8.2 (34 CG iterations against 196), but even
-    #: at the demo's 1e-2 (4.1 against 4.0 ms); a 64 x 64 grid held by one edge 22.9 against 27.0 ms (33 against
-    #: 198 = the cap). Below it the cycle's kernels cost more to compile (about 6 s) than they save.
-    AGGREGATION_FROM = 2000
-    #: whether `auto` preconditions a garment by V-cycles over its own 4-8 levels once its seams are merged. No:
-    #: over a run to rest on a 2-core CPU, the demo T-shirt on 5 levels (1,370 particles) took 29 CG iterations
-    #: per step over them against Jacobi's 96 but 27.8 ms per step against 14.3 (on its finest level 11.5 against
-    #: 8.7: a cycle costs four Jacobi iterations, the coarsest factor 0.9 ms). "multigrid" asks for it.
-    GARMENT_LEVELS = False
-    #: CG iterations unrolled into one kernel launch; iterations past convergence inside a chunk are no-ops
-    CHUNK = 8
-    _DELTA, _THRESH, _BETA, _ACTIVE, _ITER, _MAXIT, _DELTA0, _RR, _DECREMENT, _RISE = range(10)  # slots of self.cg
-
     def __init__(self, model, state, forces, **options):
         super().__init__(model, state, forces, **options)
-        fp = model.fp
-        P, S = model.capacity[0], max(model.capacity[1], 1)
+        fp, P = model.fp, model.capacity[0]
+        self.system = BlockSystem(model, state.x)     # A of the Newton iteration
+        self.filter = ConstraintFilter(model, state.contacts)
+        self.pcg = PCG(model)
+        self.policy = PreconditionerPolicy(self.options["preconditioner"], model)
+        self.b, self.dv = self.pcg.b, self.pcg.x      # the Newton system's right-hand side [kg m/s], its dv [m/s]
         blk = FieldBlock()
-        self.spring_u = blk.vector(3, fp, S)  # unit direction a -> b
-        self.spring_axial = blk.scalar(fp, S)         # h kd + h^2 k (1 - g)   [kg/s]
-        self.spring_iso = blk.scalar(fp, S)           # h^2 k g + h c           [kg]
-        self.b = blk.vector(3, fp, P)
-        self.inv_diag = blk.matrix(3, 3, fp, P)  # Jacobi: the inverse 3x3 diagonal blocks of the filtered A
-        self.dv, self.r, self.z, self.p, self.q = (blk.vector(3, fp, P) for _ in range(5))
         self.x0, self.v0 = blk.vector(3, fp, P), blk.vector(3, fp, P)  # the step's start [m], [m/s]
         self.dv_total = blk.vector(3, fp, P)          # v_k - v0 [m/s] (after the step: its whole velocity change)
-        self.cg = blk.scalar(ti.f64, 10)              # CG scalars (see the indices above), kept on the device
         self.warm = blk.scalar(ti.i32, ())            # 1: start CG from the last step's dv_total (Jacobi only)
         self.ip = blk.scalar(ti.f64, len(self.ALPHAS) + 2)  # IP(alpha = 0), IP(ALPHAS...), grad.dv [J]
         self.energy = blk.scalar(ti.f64, len(self.ALPHAS) + 2)  # E(alpha = 0), E(ALPHAS...), E at the start [J]
@@ -123,18 +86,10 @@ class Implicit(Integrator):
         self.stats = {"cg_iterations": 0, "cg_unconverged_steps": 0, "newton_iterations": 0, "line_search_cuts": 0}
         self.last_residual = 0.0  # sqrt(r.Pr / b.Pb) at the end of the last step
         self._warned_cap = False
-        self.multigrid = None        # the preconditioner in use: None (Jacobi), 4-8 levels or aggregation levels
-        self.level_multigrid = None  # over the cloth's 4-8 levels, when it has nested ones
-        self.off_levels = None       # what is used while the model is on none of them: None or aggregation
-        self.starts_off_levels = False  # the model starts on none of the levels (a garment's pieces apart)
-        # Jacobi-PCG starts from the previous step's dv: it carries over the smooth part Jacobi is slow to find
-        # (measured on a 65 x 65 cotton sheet held by one edge at 1/60 s: 43 mm RMS from the exact step's
-        # trajectory after 0.5 s instead of 190 mm, with 15 % fewer iterations). Multigrid finds the smooth part
-        # itself and starts from 0 (a warm start cost it iterations and accuracy there). On a drape at rest the
-        # carried-over dv can keep a flutter alive that the tolerance, relative to a small b, accepts every step: the
-        # 4-8 T-shirt sewn on its finest level still moved at 16 mm/s after 30 s at CG 1e-3 with it, and rested at
-        # 8-13 s without it. The other way round, it carries small steady forces that one cold solve at 1e-3 drops:
-        # the demo T-shirt's shoulder seams closed with it and held 3.2 mm open without it.
+        # Jacobi-PCG starts from the previous step's dv: it carries over the smooth part Jacobi is slow to find;
+        # multigrid finds it itself and starts from 0. On a drape at rest the carried-over dv can keep a flutter
+        # alive that the tolerance, relative to a small b, accepts every step; the other way round it carries small
+        # steady forces (a closing seam's) that one cold solve drops. Figures: docs/performance.md, preconditioners.
         self.warm[None] = int(self.options["warm_start"])
         self.reset()
 
@@ -144,114 +99,47 @@ class Implicit(Integrator):
         self.dv_total.fill(0)
 
     # ------------------------------------------------------------------ the preconditioner
-    #: without levels the preconditioner falls back to Jacobi (approx-implicit's multigrid cannot)
-    levels_required = False
-
     @property
     def needs_levels(self) -> bool:
         """Whether this integrator wants the cloth's 4-8 levels (attach_levels) when it has nested ones."""
         return self.options["preconditioner"] != "jacobi"
 
-    def attach_levels(self, levels, cloth_levels, pinned, level: int | None) -> None:
-        """Build the multigrid preconditioner over a nested 4-8 hierarchy: `levels` (multilevel Level list),
-        `cloth_levels` (ClothData per level: masses, springs, spring constants), `pinned` (unused: the pins are
-        read from the inverse masses at every step) and the current level (0-based), or None while the model is on
-        none of them (a garment's pieces apart before their seams merge on its start level): CG keeps the
-        preconditioner it has (Jacobi, or aggregation levels) until a topology change names a level. Raises
-        ValueError when the levels are not nested (multilevel.spring_multigrid.copies) or the coarsest is too large."""
-        from multilevel.spring_multigrid import SERIAL_BELOW, SpringMultigrid
-
-        self.level_multigrid = SpringMultigrid(
-            levels, [d.springs for d in cloth_levels], [d.stiffness for d in cloth_levels],
-            [d.damping for d in cloth_levels], [d.rest_length for d in cloth_levels], [d.mass for d in cloth_levels],
-            fp=self.model.fp, viscous=[d.viscous_damping() for d in cloth_levels],
-            # every loop serial for a cloth the CPU runs serially; on a GPU none (the CPU's threshold ran every loop
-            # in one GPU thread: an H100 took 170 ms per step, 4.7 V-cycles, on a 65 x 65 sheet)
-            serial_below=1 << 62 if self.model.serial else
-            (SERIAL_BELOW if ti.lang.impl.current_cfg().arch == ti.cpu else 0))
-        self.starts_off_levels = level is None
-        if level is not None:
-            self.level_multigrid.set_active_level(level)
-            self.multigrid = self.level_multigrid
-            self.warm[None] = 0
-
-    def attach_aggregation(self) -> None:
-        """Build the multigrid preconditioner over aggregates of the cloth's particles (multilevel.aggregation),
-        for a cloth without nested 4-8 levels (or before it is on them); rebuilt at every topology change. Raises
-        ValueError when the cloth does not coarsen (it stays on Jacobi)."""
-        amg = AggregationMultigrid(self.model.capacity[:2], fp=self.model.fp,
-                                   serial=ti.lang.impl.current_cfg().arch == ti.cpu)
-        amg.rebuild(self.model.data.springs, self.model.data.n_particles)
-        self.multigrid = self.off_levels = amg
-        self.warm[None] = 0
+    def attach_levels(self, nested, why: str | None) -> str | None:
+        """The cloth's nested 4-8 levels (linear.NestedLevels; None, and why, where it has none): the preconditioner
+        policy picks what CG uses (linear.policy). Returns a note for the run when it cannot honour the option."""
+        note = self.policy.attach(nested, why)
+        self.warm[None] = int(self.options["warm_start"] and self.policy.current.warm_start)
+        return note
 
     def topology_changed(self, level: int | None = None) -> None:
         """A refill of the model: on the 4-8 level `level` (a level switch, a garment's seams merged on its start
         level), or with no level named: on the level it was on when its particle count is that level's (new spring
         constants), else off the levels again (a garment's pieces apart after a reset)."""
         self.reset()
-        mg = self.level_multigrid
-        if mg is not None:
-            if level is not None:
-                mg.set_active_level(level)
-                self.multigrid = mg
-            elif self.model.data.n_particles != mg.sizes[mg.active]:
-                self.multigrid = self.off_levels
-        if isinstance(self.multigrid, AggregationMultigrid):
-            self.multigrid.rebuild(self.model.data.springs, self.model.data.n_particles)
-        self.warm[None] = int(self.options["warm_start"] and self.multigrid is None)
+        self.policy.topology_changed(level)
+        self.warm[None] = int(self.options["warm_start"] and self.policy.current.warm_start)
 
     @property
     def detail(self) -> str:
-        if isinstance(self.multigrid, AggregationMultigrid):
-            sizes = " > ".join(str(n) for n in self.multigrid.sizes)
-            return f"CG preconditioned by V-cycles over {len(self.multigrid.sizes)} aggregation levels ({sizes})"
-        if self.multigrid is not None:
-            before = ""
-            if self.level_multigrid is not None and self.starts_off_levels:
-                before = " once on them (before: " + ("aggregation levels)" if self.off_levels is not None else
-                                                      "Jacobi)")
-            return f"CG preconditioned by V-cycles over {self.multigrid.n_levels} 4-8 levels{before}"
-        return "Jacobi-preconditioned CG"
-
-    def _prepare_multigrid(self, dt: float) -> None:
-        """The multigrid's operators for the Newton system just assembled."""
-        mg = self.multigrid
-        if isinstance(mg, AggregationMultigrid):
-            mg.prepare(self.spring_u, self.spring_axial, self.spring_iso, self.model.mass, self.model.inv_mass,
-                       self.contacts if self.has_contacts else None,
-                       1.0 + dt * self.forces.air_damping_value)
-        else:
-            mg.prepare(self.state.x, self.model.inv_mass, dt, self.forces.air_damping_value,
-                       self.contacts if self.has_contacts else None)
+        return self.policy.detail
 
     # ------------------------------------------------------------------ the step
     def _advance(self, dt: float) -> None:
-        tol2 = self.options["cg_tolerance"] ** 2
-        h_gamma = dt * self.forces.air_damping_value
+        tolerance = self.options["cg_tolerance"]
+        self.system.set_step(dt, self.forces.air_damping_value)
         if self.has_contacts:
             self._contact_friction(dt)  # before the step's start is kept: it changes velocities
         self._begin()
         its, unconverged, residual, first_decrement = 0, 0, 0.0, None
         budget = self.options["cg_max_iterations"]  # per step: a further Newton iteration spends what is left
         for k in range(self.options["newton_iterations"]):
-            self._assemble(dt, tol2, budget - its, int(k == 0))
-            if self.multigrid is None:
-                while self._cg_chunk(h_gamma):
-                    pass
-            else:
-                mg = self.multigrid
-                self._prepare_multigrid(dt)
-                first = 1
-                while True:
-                    mg.apply(self.r, self.z)
-                    if not self._mg_iteration(h_gamma, tol2, first):
-                        break
-                    first = 0
+            self._assemble(dt, self.system.h_gamma, int(k == 0))
+            preconditioner = self.policy.current
+            preconditioner.prepare(self.system, self.filter)
+            self.pcg.solve(self.system, self.filter, preconditioner, tolerance, budget - its)
             # the line search returns what the host needs of this iteration: one read per Newton iteration
-            it, delta, delta0, decrement, rise = self._line_search(dt, int(self.options["line_search"]),
-                                                                   int(self.multigrid is not None))
-            residual = math.sqrt(max(delta, 0.0) / delta0) if delta0 > 0 else 0.0
+            it, rz, rz_b, decrement, rise = self._line_search(dt, int(self.options["line_search"]))
+            residual = math.sqrt(max(rz, 0.0) / rz_b) if rz_b > 0 else 0.0
             its += int(it)
             unconverged += int(residual > self.options["cg_tolerance"])
             self.stats["newton_iterations"] += 1
@@ -266,33 +154,11 @@ class Implicit(Integrator):
             self._warned_cap = True  # backward Euler only dissipates: say it once when the cap lets a step gain energy
             warn(f"implicit: CG stopped at its cap of {budget} iterations (relative residual {residual:.2g}) and the "
                  f"step gained {rise:.3g} J; raise cg_max_iterations"
-                 + ("" if self.multigrid is not None else ' or set preconditioner = "multigrid"'))
+                 + (' or set preconditioner = "multigrid"' if self.policy.current is self.policy.jacobi else ""))
         self.last_residual = residual
         self.stats["cg_iterations"] += its
         self.stats["cg_unconverged_steps"] += min(unconverged, 1)
         self.stats["line_search_cuts"] += int(self.cut[None])
-
-    @ti.func
-    def _product(self, i, vec: ti.template()):
-        """(A vec)_i without the mass term, from the per-spring axial/isotropic coefficients."""
-        m = self.model
-        out = ti.Vector.zero(m.fp, 3)
-        for e in range(m.adj_offset[i], m.adj_offset[i + 1]):
-            sp = m.adj_spring[e]
-            dq = vec[i] - vec[m.adj_other[e]]
-            u = self.spring_u[sp]
-            out += self.spring_axial[sp] * u.dot(dq) * u + self.spring_iso[sp] * dq
-        return out
-
-    @ti.func
-    def _system_product(self, i, mass_scale, active):
-        """q[i] = (S A p)_i (0 for a pinned particle or once CG stopped); returns p[i].q[i] in float64."""
-        m = self.model
-        q = ti.Vector.zero(m.fp, 3)
-        if m.inv_mass[i] != 0 and active != 0:
-            q = self.contact_filter(i, m.mass[i] * mass_scale * self.p[i] + self._product(i, self.p))
-        self.q[i] = q
-        return ti.cast(self.p[i].dot(q), ti.f64)
 
     @ti.kernel
     def _contact_friction(self, dt: ti.f64):
@@ -333,11 +199,11 @@ class Implicit(Integrator):
                     # the filter would otherwise keep against the force that presses (the T-shirt at rest gained
                     # 3e-5 J a step that way), and which freed would fall back and be pushed out every step
                     v = vt
-            self.q[i] = v  # scratch: the new velocity
+            self.pcg.q[i] = v  # scratch: the new velocity
             c.stuck[i] = stuck
         ti.loop_config(serialize=self.model.serial)
         for i in range(m.n_particles[None]):
-            s.v[i] = self.q[i]
+            s.v[i] = self.pcg.q[i]
 
     @ti.kernel
     def _begin(self):
@@ -361,16 +227,17 @@ class Implicit(Integrator):
             self.energy[NA + 1] += 0.5 * ti.cast(m.stiffness[sp], ti.f64) * stretch * stretch
 
     @ti.kernel
-    def _assemble(self, dt: ti.f64, tol2: ti.f64, max_iterations: ti.i32, first: ti.i32):
+    def _assemble(self, dt: ti.f64, h_gamma: ti.f64, first: ti.i32):
         """The Newton system at v_k = v0 + dv_total (x_k = x0 + h v_k, written into the state so that the force
-        code evaluates there): spring coefficients, b = S (h f(x_k, v_k) - M dv_total), the Jacobi diagonal, and
-        CG's start (the last step's velocity change for Jacobi on the first iteration, else 0). The first
+        code evaluates there): the system's spring blocks, b = S (h f(x_k, v_k) - M dv_total), and CG's start (the
+        last step's velocity change on the first iteration where the preconditioner allows it, else 0). The first
         iteration linearises f(x0 + h v0) about x0 instead (x_0 = x0, b = S h (f0 + h (df/dx) v0)): the classical
         one-solve step of Baraff and Witkin, which is Newton's first iteration from v = 0, not from v0. Started
         from the predicted x0 + h v0, a sheet at 1/120 s slid off the mannequin's head where runs at a tenth of
         the step stay on it."""
-        m, s, fm = self.model, self.state, self.forces
+        m, s, fm, sy = self.model, self.state, self.forces, self.system
         h = ti.cast(dt, m.fp)
+        sy.mass_scale[None] = 1.0 + ti.cast(h_gamma, m.fp)
         ti.loop_config(serialize=self.model.serial)
         for i in range(m.n_particles[None]):
             guess = ti.Vector.zero(m.fp, 3)
@@ -386,153 +253,21 @@ class Implicit(Integrator):
                 self.dv[i] = ti.Vector.zero(m.fp, 3)
         ti.loop_config(serialize=self.model.serial)
         for sp in range(m.n_springs[None]):
-            d = s.x[m.spring_b[sp]] - s.x[m.spring_a[sp]]
-            length = ti.max(d.norm(), 1e-12)
-            u = d / length
-            g = ti.max(0.0, 1.0 - m.rest_length[sp] / length)
-            k = m.stiffness[sp]
-            self.spring_u[sp] = u
-            self.spring_axial[sp] = h * m.damping[sp] + h * h * k * (1.0 - g)
-            self.spring_iso[sp] = h * h * k * g + h * m.viscous[sp]
-        mass_scale = 1.0 + h * fm.air_damping[None]
+            sy.set_spring(sp, s.x[m.spring_b[sp]] - s.x[m.spring_a[sp]], h)
         ti.loop_config(serialize=self.model.serial)
         for i in range(m.n_particles[None]):
-            zero = ti.Vector.zero(m.fp, 3)
-            if m.inv_mass[i] == 0:
-                self.b[i] = zero
-            else:
-                f = fm.particle_force(i, True)
-                eye = ti.Matrix.identity(m.fp, 3)
-                diag = eye * m.mass[i] * mass_scale
-                kv = ti.Vector.zero(m.fp, 3)  # h^2 K v0 on the first iteration (K = -df/dx)
-                for e in range(m.adj_offset[i], m.adj_offset[i + 1]):
-                    sp = m.adj_spring[e]
-                    u = self.spring_u[sp]
-                    diag += self.spring_axial[sp] * u.outer_product(u) + self.spring_iso[sp] * eye
-                    if first != 0:
-                        dvel = s.v[i] - s.v[m.adj_other[e]]
-                        kv += (self.spring_axial[sp] - h * m.damping[sp]) * u.dot(dvel) * u \
-                            + (self.spring_iso[sp] - h * m.viscous[sp]) * dvel
-                self.b[i] = self.contact_filter(i, h * f - kv - m.mass[i] * self.dv_total[i])
-                # the block of the filtered system S A S + M' (I - S): on a contact the tangential block, whose
-                # inverse is not the per-axis one (on the T-shirt resting on the body: 143 -> 80 CG its per step)
-                S = self.contact_projector(i)
-                self.inv_diag[i] = (S @ diag @ S + m.mass[i] * mass_scale * (eye - S)).inverse()
-        delta = ti.cast(0.0, ti.f64)
-        bz = ti.cast(0.0, ti.f64)  # b.D^-1 b: the tolerance is relative to b, so that a good start stops early
-        ti.loop_config(serialize=self.model.serial)
-        for i in range(m.n_particles[None]):
-            zero = ti.Vector.zero(m.fp, 3)
-            self.p[i] = zero
-            if m.inv_mass[i] == 0:
-                self.r[i] = zero
-                self.z[i] = zero
-            else:
-                r = self.b[i] - self.contact_filter(i, m.mass[i] * mass_scale * self.dv[i]
-                                                    + self._product(i, self.dv))
-                self.r[i] = r
-                z = self.contact_filter(i, self.inv_diag[i] @ r)
-                self.z[i] = z
-                delta += ti.cast(r.dot(z), ti.f64)
-                bz += ti.cast(self.b[i].dot(self.contact_filter(i, self.inv_diag[i] @ self.b[i])), ti.f64)
-        self.cg[self._DELTA] = delta
-        self.cg[self._DELTA0] = bz
-        self.cg[self._THRESH] = tol2 * bz
-        self.cg[self._ITER] = 0.0
-        self.cg[self._BETA] = 0.0
-        self.cg[self._MAXIT] = ti.cast(max_iterations, ti.f64)
-        self.cg[self._ACTIVE] = 1.0 if delta > tol2 * bz and max_iterations > 0 else 0.0
-
-    @ti.kernel
-    def _cg_chunk(self, h_gamma: ti.f64) -> ti.i32:
-        """CHUNK preconditioned CG iterations (BW98 modified PCG with the pinned rows filtered out); returns whether
-        CG is still iterating. Scalars live in self.cg; once converged (or at the cap) the remaining iterations
-        change nothing."""
-        m = self.model
-        cg = ti.static(self.cg)
-        mass_scale = 1.0 + ti.cast(h_gamma, m.fp)
-        for _ in ti.static(range(self.CHUNK)):
-            # p = z + beta p (beta = 0 on the first iteration since p = 0), then q = A p and p.q
-            ti.loop_config(serialize=self.model.serial)
-            for i in range(m.n_particles[None]):
-                if m.inv_mass[i] != 0 and cg[self._ACTIVE] != 0:
-                    self.p[i] = self.z[i] + self.p[i] * ti.cast(cg[self._BETA], m.fp)
-            pq = ti.cast(0.0, ti.f64)
-            ti.loop_config(serialize=self.model.serial)
-            for i in range(m.n_particles[None]):
-                pq += self._system_product(i, mass_scale, cg[self._ACTIVE])
-            alpha = ti.cast(0.0, ti.f64)
-            if cg[self._ACTIVE] != 0 and pq > 0:
-                alpha = cg[self._DELTA] / pq
-            a = ti.cast(alpha, m.fp)
-            delta_new = ti.cast(0.0, ti.f64)
-            ti.loop_config(serialize=self.model.serial)
-            for i in range(m.n_particles[None]):
-                if m.inv_mass[i] != 0:
-                    self.dv[i] += a * self.p[i]
-                    r = self.r[i] - a * self.q[i]
-                    self.r[i] = r
-                    z = self.contact_filter(i, self.inv_diag[i] @ r)
-                    self.z[i] = z
-                    delta_new += ti.cast(r.dot(z), ti.f64)
-            if cg[self._ACTIVE] != 0:
-                cg[self._ITER] += 1.0
-                cg[self._BETA] = delta_new / cg[self._DELTA] if pq > 0 else 0.0
-                cg[self._DELTA] = delta_new
-                if delta_new <= cg[self._THRESH] or cg[self._ITER] >= cg[self._MAXIT] or pq <= 0:
-                    cg[self._ACTIVE] = 0.0
-        return ti.cast(cg[self._ACTIVE] != 0, ti.i32)
-
-    @ti.kernel
-    def _mg_iteration(self, h_gamma: ti.f64, tol2: ti.f64, first: ti.i32) -> ti.i32:
-        """One CG iteration after the V-cycle wrote z = V(r): z = S z and the convergence test on r.z (it stops
-        before any update: the V-cycle is the measure), then p = z + beta p, q = S A p, dv and r. Scalars stay in
-        self.cg; returns whether CG goes on (0: this call found it converged or at its cap, and changed nothing)."""
-        m = self.model
-        cg = ti.static(self.cg)
-        mass_scale = 1.0 + ti.cast(h_gamma, m.fp)
-        rz = ti.cast(0.0, ti.f64)
-        ti.loop_config(serialize=self.model.serial)
-        for i in range(m.n_particles[None]):
-            z = ti.Vector.zero(m.fp, 3)
+            b = ti.Vector.zero(m.fp, 3)
             if m.inv_mass[i] != 0:
-                z = self.contact_filter(i, self.z[i])
-            self.z[i] = z
-            rz += ti.cast(self.r[i].dot(z), ti.f64)
-        beta = ti.cast(0.0, ti.f64)
-        if first != 0:
-            cg[self._DELTA0] = rz
-            cg[self._THRESH] = tol2 * rz
-            cg[self._ACTIVE] = 1.0 if rz > 0 and cg[self._MAXIT] > 0 else 0.0
-        elif cg[self._ACTIVE] != 0:
-            if rz <= cg[self._THRESH] or cg[self._ITER] >= cg[self._MAXIT]:
-                cg[self._ACTIVE] = 0.0
-            elif cg[self._DELTA] > 0:
-                beta = rz / cg[self._DELTA]
-        cg[self._RR] = rz  # the residual's measure, also when this was the last look
-        ti.loop_config(serialize=self.model.serial)
-        for i in range(m.n_particles[None]):
-            if m.inv_mass[i] != 0 and cg[self._ACTIVE] != 0:
-                self.p[i] = self.z[i] + self.p[i] * ti.cast(beta, m.fp)
-        pq = ti.cast(0.0, ti.f64)
-        ti.loop_config(serialize=self.model.serial)
-        for i in range(m.n_particles[None]):
-            pq += self._system_product(i, mass_scale, cg[self._ACTIVE])
-        alpha = ti.cast(0.0, ti.f64)
-        if cg[self._ACTIVE] != 0 and pq > 0:
-            alpha = rz / pq
-        a = ti.cast(alpha, m.fp)
-        ti.loop_config(serialize=self.model.serial)
-        for i in range(m.n_particles[None]):
-            if m.inv_mass[i] != 0 and cg[self._ACTIVE] != 0:
-                self.dv[i] += a * self.p[i]
-                self.r[i] -= a * self.q[i]
-        if cg[self._ACTIVE] != 0:
-            cg[self._ITER] += 1.0
-            cg[self._DELTA] = rz
-            if pq <= 0:
-                cg[self._ACTIVE] = 0.0
-        return ti.cast(cg[self._ACTIVE] != 0, ti.i32)
+                kv = ti.Vector.zero(m.fp, 3)  # h^2 K v0 on the first iteration (K = -df/dx)
+                if first != 0:
+                    for e in range(m.adj_offset[i], m.adj_offset[i + 1]):
+                        sp = m.adj_spring[e]
+                        u = sy.u[sp]
+                        dvel = s.v[i] - s.v[m.adj_other[e]]
+                        kv += (sy.axial[sp] - h * m.damping[sp]) * u.dot(dvel) * u \
+                            + (sy.iso[sp] - h * m.viscous[sp]) * dvel
+                b = self.contact_filter(i, h * fm.particle_force(i, True) - kv - m.mass[i] * self.dv_total[i])
+            self.b[i] = b
 
     @ti.func
     def _particle_potential(self, i, hh, gamma, ext, j0: ti.template(), j1: ti.template()):
@@ -565,7 +300,7 @@ class Implicit(Integrator):
         kd = ti.cast(m.damping[sp], ti.f64)
         c = ti.cast(m.viscous[sp], ti.f64)
         L0 = ti.cast(m.rest_length[sp], ti.f64)
-        u = ti.cast(self.spring_u[sp], ti.f64)
+        u = ti.cast(self.system.u[sp], ti.f64)
         wa = ti.cast(m.inv_mass[ia] != 0, ti.f64)
         wb = ti.cast(m.inv_mass[ib] != 0, ti.f64)
         for j in ti.static(range(j0, j1)):
@@ -581,13 +316,13 @@ class Implicit(Integrator):
             self.energy[j] += 0.5 * k * stretch * stretch
 
     @ti.kernel
-    def _line_search(self, dt: ti.f64, search: ti.i32, multigrid: ti.i32) -> ti.types.vector(5, ti.f64):
+    def _line_search(self, dt: ti.f64, search: ti.i32) -> ti.types.vector(5, ti.f64):
         """dv_total += alpha dv, with alpha the longest of ALPHAS whose incremental potential IP satisfies the
         sufficient decrease (1 without the search; 1/8 when none does). The full step is evaluated first, the shorter
         ones only when it fails (in the same launch). IP and the total energy E (kinetic + spring + gravity) of every
         candidate are summed in float64 over the free particles and every spring, with the state still at the
         iterate (its spring directions, its external forces). Returns (CG iterations, the residual's
-        measure r.z at the end (multigrid: its last look), b.z_b, the Newton decrement [J], the rise of E above the
+        measure r.z at CG's last look, b.z_b, the Newton decrement [J], the rise of E above the
         step's start [J])."""
         m, s, fm = self.model, self.state, self.forces
         A = ti.static(self.ALPHAS)
@@ -636,22 +371,19 @@ class Implicit(Integrator):
             energy = self.energy[1]
         if alpha < 1.0:
             self.cut[None] += 1
-        self.cg[self._DECREMENT] = -self.ip[NA + 1]  # the Newton decrement dv^T A dv [J]
+        decrement = -self.ip[NA + 1]  # the Newton decrement dv^T A dv [J]
         # the rise of the total energy above the step's start, beyond the external forces' work and round-off (E is
         # summed in float64 from the state's float32 or float64 positions and velocities: round-off of a few 1e-7 of
         # E in float32, which must not count as a gain that calls for another Newton iteration)
         start = self.energy[NA + 1]
         roundoff = ti.static(1e-6 if self.model.fp == ti.f32 else 1e-12)
-        self.cg[self._RISE] = energy - start - ti.max(work, 0.0) - roundoff * ti.abs(start)
+        rise = energy - start - ti.max(work, 0.0) - roundoff * ti.abs(start)
         ti.loop_config(serialize=self.model.serial)
         for i in range(m.n_particles[None]):
             if m.inv_mass[i] != 0:
                 self.dv_total[i] += ti.cast(alpha, m.fp) * self.dv[i]
-        measure = self.cg[self._DELTA]
-        if multigrid != 0:
-            measure = self.cg[self._RR]
-        return ti.Vector([self.cg[self._ITER], measure, self.cg[self._DELTA0], self.cg[self._DECREMENT],
-                          self.cg[self._RISE]], ti.f64)
+        cg = self.pcg
+        return ti.Vector([ti.cast(cg.iterations[None], ti.f64), cg.rz[None], cg.rz_b[None], decrement, rise], ti.f64)
 
     @ti.kernel
     def _finish(self, dt: ti.f64):

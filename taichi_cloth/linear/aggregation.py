@@ -3,7 +3,7 @@ garment, a locally refined cloth): levels by aggregation of neighbouring particl
 projection (after Tamstorf, Jones and McCormick 2015, "Smoothed aggregation multigrid for cloth simulation", without
 the smoothing of the prolongation).
 
-The system the implicit integrator solves (multilevel.spring_multigrid gives its blocks) is filtered: S A S dv = S b
+The system the implicit integrator solves (linear.system gives its blocks) is filtered: S A S dv = S b
 with S_i = 0 at a pin and I - n n^T at a contact. The cycle approximates the inverse of
 
     A~ = S A S + M' (I - S),   M' = M (1 + h gamma),
@@ -23,9 +23,7 @@ plus edge blocks, summed from the level above without any matrix product:
 Levels are built until at most COARSE_TARGET vertices remain; the coarsest is factored (Cholesky, float64) in every
 prepare. A V(1,1) cycle with weighted block-Jacobi smoothing is symmetric, as CG needs.
 
-Measured with a scipy prototype on the T-shirt after 1.25 s of sewing (1,370 particles, 7,056 springs, h = 1/120 s,
-the engine's own right-hand side): levels of 1,370, 107 and 9 vertices; PCG to a relative preconditioned residual of
-1e-3 took 30 iterations (4 % from the exact solution) where Jacobi took 149 (7 %).
+Iteration counts and timings against Jacobi: docs/performance.md, preconditioners.
 
 House rules: the levels are packed into fields sized once from the cloth's capacity (coarse levels hold at most as
 many vertices and edges as the cloth), the level bounds are runtime values, so a rebuild after a topology change (a
@@ -37,7 +35,9 @@ import taichi as ti
 
 from clothbase.fields import FieldBlock
 
+from ..model import csr
 from .dense import cholesky, cholesky_solve
+from .system import spring_block
 
 #: the most levels (the cloth itself included); a 256 x 256 sheet needs 5
 MAX_LEVELS = 6
@@ -78,13 +78,6 @@ def aggregate(n: int, ends: np.ndarray) -> np.ndarray:
     return agg
 
 
-def _csr(keys: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """(pointer (n + 1,), order) grouping the entries by key 0..n-1 (stable)."""
-    ptr = np.zeros(n + 1, np.int64)
-    np.cumsum(np.bincount(keys, minlength=n), out=ptr[1:])
-    return ptr, np.argsort(keys, kind="stable")
-
-
 @ti.data_oriented
 class AggregationMultigrid:
     """V-cycles over aggregation levels for the implicit spring system of a cloth (see the module docstring).
@@ -95,6 +88,10 @@ class AggregationMultigrid:
     omega:     the block-Jacobi weight
     Call rebuild(springs, n_particles) before the first prepare, and again whenever the cloth's topology changes.
     """
+
+    #: applied by its own kernels between CG's (linear.pcg), from a zero start
+    inline = False
+    warm_start = False
 
     def __init__(self, capacity: tuple[int, int], fp=ti.f32, serial: bool = True, omega: float = DEFAULT_OMEGA):
         P, S = int(capacity[0]), int(max(capacity[1], 1))
@@ -176,7 +173,7 @@ class AggregationMultigrid:
         edge = np.concatenate([np.arange(eb[-1])] * 2)
         other = np.concatenate([g_ends[:, 1], g_ends[:, 0]])
         is_a = np.concatenate([np.ones(eb[-1], np.int64), np.zeros(eb[-1], np.int64)])
-        adj_ptr, order = _csr(rows, V)
+        adj_ptr, edge, other, is_a = csr(rows, V, edge, other, is_a)
         pad = lambda a, size: np.concatenate([a, np.zeros(size - len(a), np.int64)]).astype(np.int32)  # noqa: E731
         # aggregates, members, inner edges and coarse edges of every coarse level
         agg_all = np.full(V, -1, np.int64)
@@ -199,23 +196,23 @@ class AggregationMultigrid:
             ce_vals.append(fe[~inside])
             ce_flip.append((ca > cb)[~inside])
         cat = lambda parts: np.concatenate(parts) if parts else np.zeros(0, np.int64)  # noqa: E731
-        mem_ptr, mo = _csr(cat(mem_keys), V)
-        in_ptr, io = _csr(cat(in_keys), V)
-        ce_ptr, co = _csr(cat(ce_keys), E)
+        mem_ptr, mem = csr(cat(mem_keys), V, cat(mem_vals))
+        in_ptr, inner = csr(cat(in_keys), V, cat(in_vals))
+        ce_ptr, ce, flip = csr(cat(ce_keys), E, cat(ce_vals), cat(ce_flip).astype(np.int64))
         self.end_a.from_numpy(end_a)
         self.end_b.from_numpy(end_b)
         self.adj_ptr.from_numpy(adj_ptr.astype(np.int32))
-        self.adj_edge.from_numpy(pad(edge[order], 2 * E))
-        self.adj_other.from_numpy(pad(other[order], 2 * E))
-        self.adj_is_a.from_numpy(pad(is_a[order], 2 * E))
+        self.adj_edge.from_numpy(pad(edge, 2 * E))
+        self.adj_other.from_numpy(pad(other, 2 * E))
+        self.adj_is_a.from_numpy(pad(is_a, 2 * E))
         self.agg.from_numpy(agg_all.astype(np.int32))
         self.mem_ptr.from_numpy(mem_ptr.astype(np.int32))
-        self.mem.from_numpy(pad(cat(mem_vals)[mo], V))
+        self.mem.from_numpy(pad(mem, V))
         self.in_ptr.from_numpy(in_ptr.astype(np.int32))
-        self.inner.from_numpy(pad(cat(in_vals)[io], E))
+        self.inner.from_numpy(pad(inner, E))
         self.ce_ptr.from_numpy(ce_ptr.astype(np.int32))
-        self.ce.from_numpy(pad(cat(ce_vals)[co], E))
-        self.ce_flip.from_numpy(pad(cat(ce_flip).astype(np.int64)[co], E))
+        self.ce.from_numpy(pad(ce, E))
+        self.ce_flip.from_numpy(pad(flip, E))
         self.vbound.from_numpy(np.concatenate([vb, np.full(MAX_LEVELS - L, vb[-1])]).astype(np.int32))
         self.ebound.from_numpy(np.concatenate([eb, np.full(MAX_LEVELS - L, eb[-1])]).astype(np.int32))
         self.n_levels[None] = L
@@ -228,30 +225,20 @@ class AggregationMultigrid:
     def omega(self, value: float) -> None:
         self.weight[None] = float(value)
 
-    def prepare(self, u, axial, iso, mass, inv_mass, contacts, mass_scale: float) -> None:
-        """Once per Newton system: the level operators of A~ from the springs' unit directions u ((S,) vec3 field),
-        their coefficients axial, iso ((S,) fields [kg]: B_s = axial u u^T + iso I), the masses and inverse masses
-        ((P,) fields [kg], [1/kg]; inverse mass 0 = pinned), the contacts (an object whose Taichi function
-        projector(i) gives particle i's 3x3 filter S_i; None: no colliders) and the mass factor 1 + h gamma. One
-        kernel launch."""
-        self._prepare(u, axial, iso, mass, inv_mass, contacts if contacts is not None else inv_mass,
-                      int(contacts is not None), float(mass_scale))
+    @property
+    def detail(self) -> str:
+        return f"V-cycles over {len(self.sizes)} aggregation levels ({' > '.join(str(n) for n in self.sizes)})"
+
+    def prepare(self, system, filt) -> None:
+        """Once per Newton system: the level operators of A~ from the system's diagonal blocks and spring blocks
+        (linear.BlockSystem) and the filter S (linear.ConstraintFilter). One kernel launch."""
+        self._prepare(system, filt)
 
     def apply(self, r, z) -> None:
         """z = V-cycle(r): r, z are (P,) vec3 fields of the cloth [kg m/s], [m/s]. One kernel launch."""
         self._cycle(r, z)
 
     # ------------------------------------------------------------------ helpers of the kernels
-    @ti.func
-    def _filter(self, i, inv_mass: ti.template(), contacts: ti.template(), with_contacts: ti.template()):
-        """S_i: 0 at a pin, else the contacts' filter of particle i (I without colliders)."""
-        Si = ti.Matrix.identity(self.fp, 3)
-        if inv_mass[i] == 0:
-            Si = ti.Matrix.zero(self.fp, 3, 3)
-        elif ti.static(with_contacts):
-            Si = ti.cast(contacts.projector(i), self.fp)
-        return Si
-
     @ti.func
     def _apply_A(self, g):
         """(A~ x)_g on g's level, from the current iterate x."""
@@ -283,31 +270,20 @@ class AggregationMultigrid:
 
     # ------------------------------------------------------------------ the kernels
     @ti.kernel
-    def _prepare(self, u: ti.template(), axial: ti.template(), iso: ti.template(), mass: ti.template(),
-                 inv_mass: ti.template(), contacts: ti.template(), with_contacts: ti.template(), mass_scale: ti.f64):
-        ms = ti.cast(mass_scale, self.fp)
+    def _prepare(self, system: ti.template(), filt: ti.template()):
+        ms = system.mass_scale[None]
         # the cloth: D_i = S_i (M' + sum B_s) S_i + M' (I - S_i), O_s = -S_a B_s S_b
         ti.loop_config(serialize=self.serial)
         for i in range(self.vbound[1]):
-            # I3 in each loop, not at kernel scope: a float64 matrix kept there faulted on CUDA (misaligned
-            # address, Taichi 1.7.4)
-            I3 = ti.Matrix.identity(self.fp, 3)
-            D = I3 * ti.cast(mass[i], self.fp) * ms
-            for e in range(self.adj_ptr[i], self.adj_ptr[i + 1]):
-                q = self.adj_edge[e]
-                uq = ti.cast(u[q], self.fp)
-                D += ti.cast(axial[q], self.fp) * uq.outer_product(uq) + ti.cast(iso[q], self.fp) * I3
-            Si = self._filter(i, inv_mass, contacts, with_contacts)
-            mi = I3 * ti.cast(mass[i], self.fp) * ms
-            self.diag[i] = Si @ D @ Si + mi - Si @ mi
+            Si = filt.projector(i)
+            # the identity made in the loop, not at kernel scope: a float64 matrix kept there faulted on CUDA
+            # (misaligned address, Taichi 1.7.4)
+            mi = ti.Matrix.identity(self.fp, 3) * system.model.mass[i] * ms
+            self.diag[i] = Si @ system.diagonal(i, ms) @ Si + mi - Si @ mi
         ti.loop_config(serialize=self.serial)
         for q in range(self.ebound[1]):
-            I3 = ti.Matrix.identity(self.fp, 3)
-            uq = ti.cast(u[q], self.fp)
-            B = ti.cast(axial[q], self.fp) * uq.outer_product(uq) + ti.cast(iso[q], self.fp) * I3
-            a, b = self.end_a[q], self.end_b[q]
-            self.off[q] = -(self._filter(a, inv_mass, contacts, with_contacts) @ B
-                            @ self._filter(b, inv_mass, contacts, with_contacts))
+            B = spring_block(system.u[q], system.axial[q], system.iso[q])
+            self.off[q] = -(filt.projector(self.end_a[q]) @ B @ filt.projector(self.end_b[q]))
         # the coarse levels, each summed from the one above (Galerkin with piecewise-constant prolongation)
         for l in ti.static(range(1, MAX_LEVELS)):
             ti.loop_config(serialize=self.serial)

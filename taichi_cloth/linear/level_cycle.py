@@ -1,14 +1,8 @@
-"""A multigrid preconditioner for the backward-Euler spring system over nested 4-8 levels.
+"""V-cycles over the cloth's nested 4-8 levels: a preconditioner of the implicit step's block system (linear.system).
 
-The system of one implicit step (Baraff and Witkin 1998), on level l:
-
-    A_l dv = M_l (1 + h gamma) dv + sum over springs s = (a, b) of B_s (dv_a - dv_b) at a, -B_s (...) at b,
-    B_s = (h kd_s + h^2 k_s (1 - g_s)) u_s u_s^T + h^2 k_s g_s I,   g_s = max(0, 1 - L0_s / l_s),
-
-u_s the spring's unit direction and l_s its length at the current positions (the clamp g >= 0 keeps A symmetric
-positive definite). M, k, kd, L0 [kg, N/m, N s/m, m] are the level's own: every 4-8 level of a cloth is built
-from the same material (taichi_cloth.multilevel_cloth), so the coarse operators are rediscretisations of the fine
-one. Every vertex of level l has a copy on level l + 1 (a vertex whose prolongation row is that one vertex with
+Every level l has the system of linear.system with its own masses and springs: every 4-8 level of a cloth is
+built from the same material (taichi_cloth.multilevel_cloth), so the coarse operators are rediscretisations of the
+fine one. Every vertex of level l has a copy on level l + 1 (a vertex whose prolongation row is that one vertex with
 weight 1): the same index on a 4-8 rectangle, where the levels are nested by index, another one on a garment's
 levels, nested by their tables (taichi_cloth.garment.levels). Following the copies up to the level simulated
 gives every coarser level its geometry from the simulated positions: the coarse springs point where the cloth is.
@@ -17,23 +11,18 @@ A V(nu, nu) cycle (the preconditioner, symmetric as CG needs):
   * smoother: block Jacobi, dv_i += omega D_i^-1 (b - A dv)_i with D_i the 3x3 diagonal block of A;
   * restriction R = P^T (a gather from the transpose of the prolongation table), prolongation P = the
     hierarchy's tables, applied to each component;
-  * the coarsest level is solved exactly: its 3 n0 x 3 n0 matrix is assembled and factored (Cholesky, float64)
-    once per step, in one thread (n0 = 25 for the usual 4 x 4 base: about 0.1 ms);
-  * contacts, on the simulated level: a particle that static friction holds this step is fixed as a pin is,
-    and a sliding one has its smoother block, its residual and its coarse correction
-    filtered (S = I - n n^T: the block S D S + m'(I - S)), so that the cycle smooths the filtered system CG
-    solves; the 4-8 T-shirt draped on the mannequin, averaged over a run to rest: 156 CG iterations per step
-    without either (Jacobi while its pieces were apart), 44 with the held ones, 29 with both (aggregation then);
+  * the coarsest level is solved exactly: its 3 n0 x 3 n0 matrix is assembled and factored (linear.dense,
+    float64) once per system, in one thread (n0 = 25 for the usual 4 x 4 base);
+  * contacts, on the simulated level: a particle that static friction holds is fixed as a pin is, and a sliding
+    one has its smoother block, its residual and its coarse correction filtered (S = I - n n^T: the block
+    S D S + m'(I - S)), so that the cycle smooths the filtered system CG solves;
   * pins: a particle of the simulated level with inverse mass 0 is fixed; a coarser vertex is fixed iff it is a
     prolongation parent of a fixed vertex of the level above, so that a prolonged correction vanishes at the
-    pins by construction (multilevel.multigrid explains why zeroing the correction afterwards is not enough).
+    pins by construction (zeroing the correction afterwards is not enough: with one pinned midpoint the coarse
+    level does not know, the coarse correction is a free-fall one and the cycle diverges).
     Both are decided on the device at every prepare, so pins that move between levels need no host work.
-The caller filters what the cycle does not know (contacts): z = S V(S r) stays symmetric on the free subspace.
-
-Measured with a scipy prototype on a 1 m cotton sheet held by one edge, after 10 steps of 1/60 s: on 129 x 129
-particles, CG to a relative preconditioned residual of 1e-3 took 16 iterations preconditioned by V(1,1) cycles
-and 847 preconditioned by Jacobi; at 1e-2 the Jacobi solution was still 77 % off the exact one, the V(1,1) one
-4 %.
+The caller (linear.pcg) filters what the cycle does not know: z = S V(S r) stays symmetric on the free subspace.
+Iteration counts and timings against Jacobi: docs/performance.md, preconditioners.
 
 House rules: every level is packed into the same fields (per-level offsets), each kernel compiles once per
 solver and takes a level's offsets as arguments, so switching the active level compiles nothing.
@@ -43,16 +32,18 @@ import numpy as np
 import taichi as ti
 
 from clothbase.fields import FieldBlock
+from multilevel.hierarchy import Level
 
+from ..model import csr
 from .dense import cholesky, cholesky_solve
-from .hierarchy import Level
+from .system import spring_block, spring_coefficients
 
-#: block-Jacobi weight; the scipy prototype measured 0.67 best among 0.5, 0.67 and 0.8 for V(1,1) cycles
+#: block-Jacobi weight; a scipy prototype measured 0.67 best among 0.5, 0.67 and 0.8 for V(1,1) cycles
 DEFAULT_OMEGA = 0.67
 #: the largest coarsest level [vertices] factored densely at every step (3 n0 unknowns, serial)
 COARSE_MAX = 128
-#: levels with fewer vertices run their loops in one thread: on a 2-core CPU a parallel loop costs about 45 us
-#: to dispatch whatever its size, more than a serial pass over a thousand vertices
+#: levels with fewer vertices run their loops in one thread: on a CPU a parallel loop's dispatch costs more than a
+#: serial pass over them (docs/performance.md, preconditioners)
 SERIAL_BELOW = 1 << 30
 
 
@@ -89,6 +80,10 @@ class SpringMultigrid:
     omega:       the Jacobi weight (a runtime attribute: changing it compiles nothing)
     """
 
+    #: applied by its own kernels between CG's (linear.pcg), from a zero start
+    inline = False
+    warm_start = False
+
     def __init__(self, levels: list[Level], springs, stiffness, damping, rest_length, mass, fp=ti.f32,
                  sweeps: int = 1, omega: float = DEFAULT_OMEGA, serial_below: int = SERIAL_BELOW, viscous=None):
         L = len(levels)
@@ -124,10 +119,8 @@ class SpringMultigrid:
             rows += [g[:, 0], g[:, 1]]
             adj_other += [g[:, 1], g[:, 0]]
             adj_spring += [q, q]
-        rows, adj_other, adj_spring = (np.concatenate(a) for a in (rows, adj_other, adj_spring))
-        order = np.argsort(rows, kind="stable")
-        adj_ptr = np.zeros(N + 1, np.int64)
-        np.cumsum(np.bincount(rows, minlength=N), out=adj_ptr[1:])
+        adj_ptr, adj_other, adj_spring = csr(np.concatenate(rows), N, np.concatenate(adj_other),
+                                             np.concatenate(adj_spring))
         up = np.full(N, -1, np.int64)  # the copy of each vertex on the next level, as a packed index
         for l, c in enumerate(copy):
             up[self.offsets[l]:self.offsets[l + 1]] = c + self.offsets[l + 1]
@@ -145,11 +138,7 @@ class SpringMultigrid:
             r_cols.append(fi + o)
             r_w.append(lv.weights[fi, fj])
         if r_rows:
-            rr, rc, rw = np.concatenate(r_rows), np.concatenate(r_cols), np.concatenate(r_w)
-            ro = np.argsort(rr, kind="stable")
-            r_ptr = np.zeros(N + 1, np.int64)
-            np.cumsum(np.bincount(rr, minlength=N), out=r_ptr[1:])
-            rc, rw = rc[ro], rw[ro]
+            r_ptr, rc, rw = csr(np.concatenate(r_rows), N, np.concatenate(r_cols), np.concatenate(r_w))
         else:
             r_ptr, rc, rw = np.zeros(N + 1, np.int64), np.zeros(1, np.int64), np.zeros(1)
 
@@ -196,8 +185,8 @@ class SpringMultigrid:
         self.mass.from_numpy(cat(mass).astype(npf))
         self.adj_ptr.from_numpy(adj_ptr.astype(np.int32))
         if len(adj_other):
-            self.adj_other.from_numpy(adj_other[order].astype(np.int32))
-            self.adj_spring.from_numpy(adj_spring[order].astype(np.int32))
+            self.adj_other.from_numpy(adj_other.astype(np.int32))
+            self.adj_spring.from_numpy(adj_spring.astype(np.int32))
         if Ns:
             e = np.concatenate(ends)
             self.end_a.from_numpy(e[:, 0].astype(np.int32))
@@ -236,16 +225,18 @@ class SpringMultigrid:
         self._omega = float(value)
         self.weight[None] = self._omega
 
-    def prepare(self, x, inv_mass, h: float, gamma: float, contacts=None) -> None:
-        """Once per step, before the cycles: the springs' directions and coefficients at the positions x (the
-        simulated level's (P,) vec3 field [m]), the pins (where inv_mass, its (P,) field, is 0, and their
-        parents), the block inverses and the coarsest factor, for the step h [s] and the air drag gamma [1/s].
-        contacts: the particles' contacts (taichi_cloth.contacts.Contacts: `stuck`, `normal`; None without
-        colliders): one that static friction holds is fixed this step as a pin is, a sliding one's normal is left
-        out on the simulated level (its smoother and its transfers work on the filtered system there), as
-        multilevel.aggregation's prepare takes them. One kernel launch."""
-        self._prepare(x, inv_mass, contacts if contacts is not None else inv_mass, int(contacts is not None),
-                      float(h), float(h * gamma), int(self.spring_offsets[self._active + 1]))
+    @property
+    def detail(self) -> str:
+        return f"V-cycles over {self.n_levels} 4-8 levels"
+
+    def prepare(self, system, filt) -> None:
+        """Once per system, before the cycles: every level's springs at the positions system.x (the simulated
+        level's (P,) vec3 field [m]) for its step system.h [s] and system.h_gamma, the pins (the simulated level's
+        inverse masses 0, and their parents), the block inverses and the coarsest factor. filt
+        (linear.ConstraintFilter): a particle its contacts' static friction holds is fixed as a pin is, a sliding
+        one's normal is left out on the simulated level (its smoother and its transfers work on the filtered system
+        there). One kernel launch."""
+        self._prepare(system.x, filt, system.h, system.h_gamma, int(self.spring_offsets[self._active + 1]))
 
     def apply(self, r, z) -> None:
         """z = V-cycle(r) on the active level: r, z are (P,) vec3 fields of the simulated level [kg m/s], [m/s]
@@ -263,8 +254,7 @@ class SpringMultigrid:
         D = ti.Matrix.identity(self.fp, 3) * self.mass[g] * mass_scale
         for e in range(self.adj_ptr[g], self.adj_ptr[g + 1]):
             q = self.adj_spring[e]
-            u = self.u[q]
-            D += self.axial[q] * u.outer_product(u) + self.iso[q] * ti.Matrix.identity(self.fp, 3)
+            D += spring_block(self.u[q], self.axial[q], self.iso[q])
         return D
 
     @ti.func
@@ -287,8 +277,7 @@ class SpringMultigrid:
 
     # ------------------------------------------------------------------ the kernels
     @ti.kernel
-    def _prepare(self, x: ti.template(), inv_mass: ti.template(), contacts: ti.template(),
-                 with_contacts: ti.template(), h: ti.f64, h_gamma: ti.f64, n_springs: ti.i32):
+    def _prepare(self, x: ti.template(), filt: ti.template(), h: ti.f64, h_gamma: ti.f64, n_springs: ti.i32):
         L = ti.static(self.n_levels)
         hh = ti.cast(h, self.fp)
         mass_scale = 1.0 + ti.cast(h_gamma, self.fp)
@@ -308,13 +297,11 @@ class SpringMultigrid:
         # the springs of every level up to the active one, at the positions of the simulated level
         ti.loop_config(serialize=ti.static(int(self.spring_offsets[-1]) < self.serial_below))
         for q in range(n_springs):
-            d = x[self.at[self.end_b[q]]] - x[self.at[self.end_a[q]]]
-            length = d.norm()
-            u = d / ti.max(length, 1e-12)
-            g = ti.max(0.0, 1.0 - self.rest[q] / ti.max(length, 1e-12))
-            self.u[q] = ti.cast(u, self.fp)
-            self.axial[q] = hh * self.kd[q] + hh * hh * self.k[q] * (1.0 - g)
-            self.iso[q] = hh * hh * self.k[q] * g + hh * self.c[q]
+            d = ti.cast(x[self.at[self.end_b[q]]] - x[self.at[self.end_a[q]]], self.fp)
+            u, axial, iso = spring_coefficients(d, hh, self.k[q], self.kd[q], self.c[q], self.rest[q])
+            self.u[q] = u
+            self.axial[q] = axial
+            self.iso[q] = iso
         # pins: the simulated level's own (inverse mass 0), then every coarser level inherits them
         for l in ti.static(range(L)):
             ti.loop_config(serialize=ti.static(self.sizes[l] < self.serial_below))
@@ -323,11 +310,11 @@ class SpringMultigrid:
                 fixed = 0
                 nrm = ti.Vector.zero(self.fp, 3)
                 if l == active:
-                    fixed = ti.select(inv_mass[i] == 0, 1, 0)
-                    if ti.static(with_contacts):
-                        if contacts.stuck[i] != 0:
+                    fixed = ti.select(filt.model.inv_mass[i] == 0, 1, 0)
+                    if ti.static(filt.has_contacts):
+                        if filt.contacts.stuck[i] != 0:
                             fixed = 1
-                        n = ti.cast(contacts.normal[i], self.fp)
+                        n = ti.cast(filt.contacts.normal[i], self.fp)
                         if n.dot(n) > 0:
                             nrm = n / n.norm()
                 self.pin[g] = fixed
@@ -376,9 +363,8 @@ class SpringMultigrid:
                         w = self.adj_other[e]
                         if self.pin[w] == 0:
                             q = self.adj_spring[e]
-                            u = ti.cast(self.u[q], ti.f64)
-                            B = ti.cast(self.axial[q], ti.f64) * u.outer_product(u) \
-                                + ti.cast(self.iso[q], ti.f64) * ti.Matrix.identity(ti.f64, 3)
+                            B = spring_block(ti.cast(self.u[q], ti.f64), ti.cast(self.axial[q], ti.f64),
+                                             ti.cast(self.iso[q], ti.f64))
                             for c in ti.static(range(3)):
                                 for d in ti.static(range(3)):
                                     self.chol[3 * v + c, 3 * w + d] -= B[c, d]

@@ -1,0 +1,151 @@
+"""Preconditioned conjugate gradients on the filtered block system (Baraff and Witkin 1998's modified PCG): solves
+S A S x = S b for x in range(S), on the device, with one host read per solve.
+
+The preconditioner is either inline (`inline = True`: a Taichi function `precondition(i, r)` evaluated inside the
+CG kernels, CHUNK iterations unrolled per launch) or applied by its own kernels (`apply(r, z)` once per iteration,
+then one CG kernel); the iteration is the same: z = S P(r), stop when sqrt(r.z / b.z_b) <= tolerance or at the cap
+(z_b the preconditioned b, so that a good start stops early), else p = z + beta p, q = S A p, x += alpha p,
+r -= alpha q. A preconditioner applied by kernels starts from x = 0, where r = b: its first look gives b.z_b.
+"""
+
+import taichi as ti
+
+from clothbase.fields import FieldBlock
+
+
+@ti.data_oriented
+class PCG:
+    """The CG vectors and scalars, sized at the model's particle capacity P.
+
+    b, x, r, z, p, q: (P,) vec3 fields of the model's precision: the right-hand side [kg m/s], the solution and
+    start [m/s] (the caller writes both), the residual, the preconditioned residual, the direction and A p.
+    The scalars (0-d float64 fields, kept on the device): rz = r.z of the last look, rz_b = b.z_b, threshold =
+    tolerance^2 rz_b, beta, active (1 while iterating), iterations, max_iterations.
+    """
+
+    #: CG iterations unrolled into one kernel launch with an inline preconditioner; iterations past convergence
+    #: inside a chunk are no-ops
+    CHUNK = 8
+
+    def __init__(self, model):
+        self.model = model
+        fp, P = model.fp, model.capacity[0]
+        blk = FieldBlock()
+        self.b, self.x, self.r, self.z, self.p, self.q = (blk.vector(3, fp, P) for _ in range(6))
+        self.rz, self.rz_b, self.threshold, self.beta = (blk.scalar(ti.f64, ()) for _ in range(4))
+        self.active, self.iterations, self.max_iterations = (blk.scalar(ti.i32, ()) for _ in range(3))
+        blk.finalize(self)
+
+    def solve(self, system, filt, preconditioner, tolerance: float, max_iterations: int) -> None:
+        """x = the CG solution of S A S x = S b from the start in x, with `system` (linear.BlockSystem), `filt`
+        (linear.ConstraintFilter) and a prepared `preconditioner`; iterations, rz and rz_b stay on the device."""
+        tol2 = tolerance * tolerance
+        self._start(system, filt, preconditioner, tol2, max_iterations)
+        if preconditioner.inline:
+            while self._iterate(system, filt, preconditioner, self.CHUNK, 0, tol2):
+                pass
+            return
+        first = 1
+        while True:
+            preconditioner.apply(self.r, self.z)
+            if not self._iterate(system, filt, preconditioner, 1, first, tol2):
+                break
+            first = 0
+
+    @ti.func
+    def _look(self, rz, first, tol2):
+        """The test on r.z of the current residual (first: the start, r = b): stop, or beta for the next p."""
+        if first != 0:
+            self.rz_b[None] = rz
+            self.threshold[None] = tol2 * rz
+            self.active[None] = ti.select(rz > self.threshold[None] and self.max_iterations[None] > 0, 1, 0)
+            self.rz[None] = rz
+        elif self.active[None] != 0:
+            if rz <= self.threshold[None] or self.iterations[None] >= self.max_iterations[None]:
+                self.active[None] = 0
+            elif self.rz[None] > 0:
+                self.beta[None] = rz / self.rz[None]
+            else:
+                self.beta[None] = 0.0
+            self.rz[None] = rz
+
+    @ti.kernel
+    def _start(self, system: ti.template(), filt: ti.template(), pre: ti.template(), tol2: ti.f64,
+               max_iterations: ti.i32):
+        """r = S (b - A x); with an inline preconditioner also z, r.z, b.z_b and the first look."""
+        m = self.model
+        self.iterations[None] = 0
+        self.beta[None] = 0.0
+        self.max_iterations[None] = max_iterations
+        rz = ti.cast(0.0, ti.f64)
+        bz = ti.cast(0.0, ti.f64)
+        ti.loop_config(serialize=m.serial)
+        for i in range(m.n_particles[None]):
+            zero = ti.Vector.zero(m.fp, 3)
+            self.p[i] = zero
+            self.r[i] = zero
+            self.z[i] = zero
+            if m.inv_mass[i] != 0:
+                r = self.b[i] - system.product(i, self.x, filt)
+                self.r[i] = r
+                if ti.static(pre.inline):
+                    z = filt.apply(i, pre.precondition(i, r))
+                    self.z[i] = z
+                    rz += ti.cast(r.dot(z), ti.f64)
+                    bz += ti.cast(self.b[i].dot(filt.apply(i, pre.precondition(i, self.b[i]))), ti.f64)
+        if ti.static(pre.inline):
+            self.rz_b[None] = bz
+            self.threshold[None] = tol2 * bz
+            self.rz[None] = rz
+            self.active[None] = ti.select(rz > tol2 * bz and max_iterations > 0, 1, 0)
+
+    @ti.kernel
+    def _iterate(self, system: ti.template(), filt: ti.template(), pre: ti.template(), n: ti.template(),
+                 first: ti.i32, tol2: ti.f64) -> ti.i32:
+        """n CG iterations; a preconditioner applied by kernels wrote z = P(r) before (n = 1). Returns whether CG
+        goes on (0: it had converged or reached its cap, and this call changed nothing)."""
+        m = self.model
+        for _ in ti.static(range(n)):
+            if ti.static(not pre.inline):  # the look at the cycle's z
+                rz = ti.cast(0.0, ti.f64)
+                ti.loop_config(serialize=m.serial)
+                for i in range(m.n_particles[None]):
+                    z = filt.apply(i, self.z[i])
+                    self.z[i] = z
+                    rz += ti.cast(self.r[i].dot(z), ti.f64)
+                self._look(rz, first, tol2)
+            beta = ti.cast(self.beta[None], m.fp)
+            ti.loop_config(serialize=m.serial)
+            for i in range(m.n_particles[None]):
+                if m.inv_mass[i] != 0 and self.active[None] != 0:
+                    self.p[i] = self.z[i] + self.p[i] * beta
+            pq = ti.cast(0.0, ti.f64)
+            ti.loop_config(serialize=m.serial)
+            for i in range(m.n_particles[None]):
+                q = ti.Vector.zero(m.fp, 3)
+                if m.inv_mass[i] != 0 and self.active[None] != 0:
+                    q = system.product(i, self.p, filt)
+                self.q[i] = q
+                pq += ti.cast(self.p[i].dot(q), ti.f64)
+            alpha = ti.cast(0.0, ti.f64)
+            if self.active[None] != 0 and pq > 0:
+                alpha = self.rz[None] / pq
+            a = ti.cast(alpha, m.fp)
+            rz_new = ti.cast(0.0, ti.f64)
+            ti.loop_config(serialize=m.serial)
+            for i in range(m.n_particles[None]):
+                if m.inv_mass[i] != 0 and self.active[None] != 0:
+                    self.x[i] += a * self.p[i]
+                    r = self.r[i] - a * self.q[i]
+                    self.r[i] = r
+                    if ti.static(pre.inline):
+                        z = filt.apply(i, pre.precondition(i, r))
+                        self.z[i] = z
+                        rz_new += ti.cast(r.dot(z), ti.f64)
+            if self.active[None] != 0:
+                self.iterations[None] += 1
+                if pq <= 0:
+                    self.active[None] = 0
+            if ti.static(pre.inline):
+                self._look(rz_new, 0, tol2)
+        return self.active[None]
