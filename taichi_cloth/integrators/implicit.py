@@ -20,8 +20,8 @@ with K and D the spring stiffness and damping Jacobians. The system, its constra
 and its preconditioners are taichi_cloth.linear's (linear.system writes the spring blocks, linear.policy picks the
 preconditioner of option `preconditioner`: auto | jacobi | multigrid). Then a line search: IP at v_k + alpha dv
 for alpha = 1, 1/2, 1/4, 1/8 in one kernel, the largest alpha with IP(v_k + alpha dv) <= IP(v_k) + 1e-4 alpha
-grad.dv is taken (on the device: no host read-back). One Newton iteration with alpha = 1 is the classical one-solve-per-step implicit
-Euler; the line search is what keeps large steps from gaining energy (one linearised solve overshoots a spring
+grad.dv is taken (on the device: no host read-back). One Newton iteration with alpha = 1 is the classical
+one-solve-per-step implicit Euler; the line search is what keeps large steps from gaining energy (one linearised solve overshoots a spring
 that rotates, and at 1/30 s a sheet dropped on a ball gained 4 x its weight x size of energy).
 
 Pinned particles are filtered out of the solve (BW98 section 5.3, S_i = 0), and a particle in contact with a

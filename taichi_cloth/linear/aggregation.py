@@ -37,7 +37,7 @@ from clothbase.fields import FieldBlock
 
 from ..model import csr
 from .dense import cholesky, cholesky_solve
-from .system import spring_block
+from .system import filtered_block, spring_block
 
 #: the most levels (the cloth itself included); a 256 x 256 sheet needs 5
 MAX_LEVELS = 6
@@ -275,11 +275,7 @@ class AggregationMultigrid:
         # the cloth: D_i = S_i (M' + sum B_s) S_i + M' (I - S_i), O_s = -S_a B_s S_b
         ti.loop_config(serialize=self.serial)
         for i in range(self.vbound[1]):
-            Si = filt.projector(i)
-            # the identity made in the loop, not at kernel scope: a float64 matrix kept there faulted on CUDA
-            # (misaligned address, Taichi 1.7.4)
-            mi = ti.Matrix.identity(self.fp, 3) * system.model.mass[i] * ms
-            self.diag[i] = Si @ system.diagonal(i, ms) @ Si + mi - Si @ mi
+            self.diag[i] = filtered_block(filt.projector(i), system.diagonal(i, ms), system.model.mass[i] * ms)
         ti.loop_config(serialize=self.serial)
         for q in range(self.ebound[1]):
             B = spring_block(system.u[q], system.axial[q], system.iso[q])

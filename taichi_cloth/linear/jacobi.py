@@ -6,6 +6,8 @@ import taichi as ti
 
 from clothbase.fields import FieldBlock
 
+from .system import filtered_block
+
 
 @ti.data_oriented
 class Jacobi:
@@ -41,9 +43,7 @@ class Jacobi:
         ti.loop_config(serialize=m.serial)
         for i in range(m.n_particles[None]):
             if m.inv_mass[i] != 0:
-                S = filt.projector(i)
-                eye = ti.Matrix.identity(m.fp, 3)
-                self.inv_diag[i] = (S @ system.diagonal(i, ms) @ S + m.mass[i] * ms * (eye - S)).inverse()
+                self.inv_diag[i] = filtered_block(filt.projector(i), system.diagonal(i, ms), m.mass[i] * ms).inverse()
 
     @ti.kernel
     def _apply(self, r: ti.template(), z: ti.template()):

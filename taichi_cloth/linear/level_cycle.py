@@ -36,7 +36,7 @@ from multilevel.hierarchy import Level
 
 from ..model import csr
 from .dense import cholesky, cholesky_solve
-from .system import spring_block, spring_coefficients
+from .system import diagonal_block, filtered_block, spring_block, spring_coefficients, spring_row
 
 #: block-Jacobi weight; a scipy prototype measured 0.67 best among 0.5, 0.67 and 0.8 for V(1,1) cycles
 DEFAULT_OMEGA = 0.67
@@ -251,11 +251,8 @@ class SpringMultigrid:
 
     @ti.func
     def _block(self, g, mass_scale):
-        D = ti.Matrix.identity(self.fp, 3) * self.mass[g] * mass_scale
-        for e in range(self.adj_ptr[g], self.adj_ptr[g + 1]):
-            q = self.adj_spring[e]
-            D += spring_block(self.u[q], self.axial[q], self.iso[q])
-        return D
+        return diagonal_block(self.fp, self.mass[g], mass_scale, self.adj_ptr[g], self.adj_ptr[g + 1],
+                              self.adj_spring, self.u, self.axial, self.iso)
 
     @ti.func
     def _filtered(self, g, vec):
@@ -266,14 +263,8 @@ class SpringMultigrid:
     @ti.func
     def _apply_A(self, g):
         """(A x)_g on g's level, from the current iterate x."""
-        xg = self.x[g]
-        out = self.mass[g] * self.mass_scale[None] * xg
-        for e in range(self.adj_ptr[g], self.adj_ptr[g + 1]):
-            q = self.adj_spring[e]
-            u = self.u[q]
-            dq = xg - self.x[self.adj_other[e]]
-            out += self.axial[q] * u.dot(dq) * u + self.iso[q] * dq
-        return out
+        return spring_row(self.mass[g] * self.mass_scale[None] * self.x[g], g, self.adj_ptr[g], self.adj_ptr[g + 1],
+                          self.adj_spring, self.adj_other, self.u, self.axial, self.iso, self.x)
 
     # ------------------------------------------------------------------ the kernels
     @ti.kernel
@@ -339,8 +330,7 @@ class SpringMultigrid:
                     # on a sliding contact the block of the filtered system: S D S + m'(I - S), S = I - n n^T
                     n = self.nrm[g]
                     S = ti.Matrix.identity(self.fp, 3) - n.outer_product(n)
-                    mI = ti.Matrix.identity(self.fp, 3) * self.mass[g] * mass_scale
-                    inv = (S @ self._block(g, mass_scale) @ S + mI - mI @ S).inverse()
+                    inv = filtered_block(S, self._block(g, mass_scale), self.mass[g] * mass_scale).inverse()
                 self.dinv[g] = inv
         # the coarsest level's matrix (pinned rows: identity), factored L L^T in one thread
         n0 = ti.static(self.sizes[0])
@@ -371,6 +361,17 @@ class SpringMultigrid:
             cholesky(self.chol, C)
 
     @ti.func
+    def _residual(self, l: ti.template()):
+        """r = S (b - A x) on level l (0 at its fixed vertices)."""
+        ti.loop_config(serialize=ti.static(self.sizes[l] < self.serial_below))
+        for i in range(self._count(l)):
+            g = ti.static(int(self.offsets[l])) + i
+            res = ti.Vector.zero(self.fp, 3)
+            if self.pin[g] == 0:
+                res = self._filtered(g, self.b[g] - self._apply_A(g))
+            self.r[g] = res
+
+    @ti.func
     def _smooth(self, l: ti.template(), from_zero: ti.template()):
         """`sweeps` weighted block-Jacobi sweeps on level l, from its current iterate; `from_zero`: the iterate is
         0, so the first sweep's residual is b itself (one operator application saved per level and cycle)."""
@@ -383,13 +384,7 @@ class SpringMultigrid:
                     g = off + i
                     self.x[g] = w * (self.dinv[g] @ self.b[g])
             else:
-                ti.loop_config(serialize=ti.static(self.sizes[l] < self.serial_below))
-                for i in range(self._count(l)):
-                    g = off + i
-                    res = ti.Vector.zero(self.fp, 3)
-                    if self.pin[g] == 0:
-                        res = self._filtered(g, self.b[g] - self._apply_A(g))
-                    self.r[g] = res
+                self._residual(l)
                 ti.loop_config(serialize=ti.static(self.sizes[l] < self.serial_below))
                 for i in range(self._count(l)):
                     g = off + i
@@ -412,15 +407,9 @@ class SpringMultigrid:
         # down: smooth, residual, restrict to the level below (whose iterate starts at zero)
         for k in ti.static(range(L - 1)):
             l = ti.static(L - 1 - k)
-            off, coff = ti.static(int(self.offsets[l]), int(self.offsets[l - 1]))
+            coff = ti.static(int(self.offsets[l - 1]))
             self._smooth(l, True)
-            ti.loop_config(serialize=ti.static(self.sizes[l] < self.serial_below))
-            for i in range(self._count(l)):
-                g = off + i
-                res = ti.Vector.zero(self.fp, 3)
-                if self.pin[g] == 0:
-                    res = self._filtered(g, self.b[g] - self._apply_A(g))
-                self.r[g] = res
+            self._residual(l)
             ti.loop_config(serialize=ti.static(self.sizes[l - 1] < self.serial_below))
             for c in range(ti.select(l <= active, ti.static(self.sizes[l - 1]), 0)):
                 gc = coff + c

@@ -37,6 +37,42 @@ def spring_block(u, axial, iso):
     return B
 
 
+@ti.func
+def filtered_block(S, D, mass):
+    """The 3x3 block S D S + M' (I - S) of the filtered operator at a row with filter S, A's block D and mass M'
+    [kg]: A on range(S), M' on its complement, so invertible where D is (a pinned row: M' I)."""
+    complement = -S  # I - S, exactly 0 where S = I
+    for c in ti.static(range(3)):
+        complement[c, c] += 1.0
+    return S @ D @ S + mass * complement
+
+
+@ti.func
+def diagonal_block(fp: ti.template(), mass, mass_scale, begin, end, adj_spring: ti.template(), u: ti.template(),
+                   axial: ti.template(), iso: ti.template()):
+    """A row's 3x3 diagonal block M' + sum of its springs' B_s [kg]: mass [kg] times mass_scale, the springs
+    adj_spring[begin:end] (indices into u, axial, iso)."""
+    D = ti.Matrix.identity(fp, 3) * mass * mass_scale
+    for e in range(begin, end):
+        q = adj_spring[e]
+        D += spring_block(u[q], axial[q], iso[q])
+    return D
+
+
+@ti.func
+def spring_row(out, i, begin, end, adj_spring: ti.template(), adj_other: ti.template(), u: ti.template(),
+               axial: ti.template(), iso: ti.template(), vec: ti.template()):
+    """out plus row i of (A - M') vec: the sum over its springs adj_spring[begin:end], to the rows
+    adj_other[begin:end], of B_s (vec_i - vec_j)."""
+    acc = out
+    for e in range(begin, end):
+        q = adj_spring[e]
+        dq = vec[i] - vec[adj_other[e]]
+        uq = u[q]
+        acc += axial[q] * uq.dot(dq) * uq + iso[q] * dq
+    return acc
+
+
 @ti.data_oriented
 class ConstraintFilter:
     """S_i of the filtered system: 0 at a pin (inverse mass 0) or where static friction holds, I - n n^T on a
@@ -109,23 +145,15 @@ class BlockSystem:
     def diagonal(self, i, mass_scale):
         """A's 3x3 diagonal block of particle i, M'_i + sum of its springs' B_s [kg]."""
         m = self.model
-        D = ti.Matrix.identity(m.fp, 3) * m.mass[i] * mass_scale
-        for e in range(m.adj_offset[i], m.adj_offset[i + 1]):
-            sp = m.adj_spring[e]
-            D += spring_block(self.u[sp], self.axial[sp], self.iso[sp])
-        return D
+        return diagonal_block(m.fp, m.mass[i], mass_scale, m.adj_offset[i], m.adj_offset[i + 1], m.adj_spring,
+                              self.u, self.axial, self.iso)
 
     @ti.func
     def spring_product(self, i, vec: ti.template()):
         """(A vec)_i without the mass term: sum over i's springs of B_s (vec_i - vec_j)."""
         m = self.model
-        out = ti.Vector.zero(m.fp, 3)
-        for e in range(m.adj_offset[i], m.adj_offset[i + 1]):
-            sp = m.adj_spring[e]
-            dq = vec[i] - vec[m.adj_other[e]]
-            u = self.u[sp]
-            out += self.axial[sp] * u.dot(dq) * u + self.iso[sp] * dq
-        return out
+        return spring_row(ti.Vector.zero(m.fp, 3), i, m.adj_offset[i], m.adj_offset[i + 1], m.adj_spring,
+                          m.adj_other, self.u, self.axial, self.iso, vec)
 
     @ti.func
     def product(self, i, vec: ti.template(), filt: ti.template()):
