@@ -1,12 +1,10 @@
-"""Multilevel 4-8 meshes (Hsiao 2006 section 2.2): the hierarchy, prolongation kernels, and the hierarchy as a
-multigrid solver.
+"""Multilevel 4-8 meshes (Hsiao 2006 section 2.2): the hierarchy and its prolongation kernels.
 
   hierarchy   the 4-8 hierarchy of a rectangle (base grid with alternating diagonals, bisection of every
               diamond), parent / diamond / prolongation tables, conformity checks (numpy)
   outline     the same for an arbitrary pattern outline: a 4-8 interior and a re-triangulated boundary band
   prolong     the Taichi kernel that refills positions and velocities on a refined level, in place
-  multigrid   V-cycles over the levels for the approximate implicit system (Jacobi smoother)
-(The implicit step's preconditioners, over these levels or over aggregates, are taichi_cloth.linear's.)
+(The implicit step's V-cycles over these levels are taichi_cloth.linear's.)
 
 Works on plain Taichi fields and numpy arrays and does not import taichi_cloth, so it can be tested alone;
 taichi_cloth.Scene composes it when a scene's cloth is a multilevel one ([multilevel] in a scene file).

@@ -125,7 +125,7 @@ def assemble(cloth, *, name: str = "cloth", integrator: str = DEFAULT_INTEGRATOR
     forces = ForceModel(model, state, gravity, air_damping, sources)
     stepper = integrator_class(integrator)(model, state, forces, **(integrator_options or {}))
     if getattr(stepper, "needs_levels", False):
-        _attach_levels(stepper, integrator, source, multilevel, specs, parts_warnings)
+        _attach_levels(stepper, source, multilevel, parts_warnings)
 
     if auto:
         try:
@@ -238,10 +238,10 @@ def _check_step_options(dt, adaptive, fps, step_guard) -> bool:
     return auto
 
 
-def _attach_levels(stepper, integrator: str, source: _Source, multilevel, specs, notes: list) -> None:
+def _attach_levels(stepper, source: _Source, multilevel, notes: list) -> None:
     """Give an integrator that asks for them the cloth's nested 4-8 levels (linear.NestedLevels; None and the reason
     where it has none: no multilevel cloth, or local refinement): it decides what it makes of them (the implicit
-    step: linear.policy). Its ValueError refuses the scene; a note it returns goes into the run's warnings."""
+    step: linear.policy); a note it returns goes into the run's warnings."""
     ml = source.multilevel
     why = None
     if ml is None:
@@ -249,13 +249,8 @@ def _attach_levels(stepper, integrator: str, source: _Source, multilevel, specs,
     elif (multilevel or {}).get("refine") == "local":
         why = "needs the nested levels of global refinement, not refine = local"
     garment = source.garment is not None
-    nested = None if why else NestedLevels(ml.hierarchy.levels, ml.levels,
-                                           [pinned_mask(specs, d.positions) for d in ml.levels],
-                                           None if garment else ml.start_level, garment)
-    try:
-        note = stepper.attach_levels(nested, why)
-    except ValueError as err:
-        raise SceneError(f"integrator {integrator!r} {err}") from None
+    nested = None if why else NestedLevels(ml.hierarchy.levels, ml.levels, None if garment else ml.start_level, garment)
+    note = stepper.attach_levels(nested, why)
     if note:
         notes.append(note)
 

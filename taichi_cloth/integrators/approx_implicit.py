@@ -18,11 +18,9 @@ r = h^2 K / (m + h^2 K), so a stiff free-falling sheet falls at a fraction of g;
               cloth we tried, with or without jv_term; offered to study the free-fall bias, not for drapes;
   jv_term:    add h^2 sum_j k_ij (v_j - v_i) (the h J~ v term) to the right-hand side, which is what
               makes more than two sweeps safe (without it, more sweeps blew up in our tests);
-  sweeps:     the number of Jacobi sweeps (Hsiao 2006 uses 2);
-  multigrid_cycles: on a multilevel (4-8) cloth, solve the system by that many iterations of CG
-              preconditioned with a V-cycle over the levels (multilevel.multigrid: the paper's Jacobi sweeps
-              as the smoother, the hierarchy's prolongation and its transpose between levels) instead of the
-              sweeps. Implies jv_term. The coarse levels carry the low-frequency motion the sweeps cannot.
+  sweeps:     the number of Jacobi sweeps (Hsiao 2006 uses 2).
+Where the sweeps are not enough, the implicit integrator solves the full system (its V-cycles run over the same
+4-8 levels): docs/integrators.md.
 Pinned particles have dv = 0 in the solve; a particle in contact with a collider in the last step has the
 normal component of its dv removed after every sweep (the BW98 constraint filter, see taichi_cloth.contacts).
 """
@@ -35,10 +33,6 @@ from clothbase.fields import FieldBlock
 from .base import Integrator, Option, at_least_one
 
 
-def non_negative(v):
-    return None if v >= 0 else "must be >= 0"
-
-
 @ti.data_oriented
 class ApproxImplicit(Integrator):
     name = "approx-implicit"
@@ -47,22 +41,10 @@ class ApproxImplicit(Integrator):
         "sweeps": Option(int, 2, "Jacobi sweeps per step (2 is the published form)", at_least_one),
         "warm_start": Option(bool, False, "start the sweeps from the previous step's dv instead of 0"),
         "jv_term": Option(bool, False, "include the h J~ v term in the right-hand side (needed for sweeps > 2)"),
-        "multigrid_cycles": Option(int, 0, "V-cycle-preconditioned CG iterations per step over the 4-8 levels "
-                                           "instead of the sweeps (needs a multilevel cloth; implies jv_term)",
-                                   non_negative),
     }
 
     def __init__(self, model, state, forces, **options):
         super().__init__(model, state, forces, **options)
-        self.multigrid = None
-        if self.options["multigrid_cycles"] > 0:
-            if options.get("jv_term") is False:
-                raise ValueError("approx-implicit multigrid_cycles needs jv_term = true (a converged solve without "
-                                 "the h J~ v term is unstable, docs/algorithms.md, approximate implicit step)")
-            self.options["jv_term"] = True
-            if self.has_contacts:  # its CG knows no contact: the result was filtered after it and gained energy
-                raise ValueError("approx-implicit multigrid_cycles cannot hold contacts inside its solve (it gains "
-                                 "energy against colliders): use the implicit integrator, or approx-implicit sweeps")
         if self.options["warm_start"]:
             warn("approx-implicit warm_start is linearly unstable on spring modes (spectral radius up to ~1.2 per "
                  "step); expect a blow-up on stiff cloth")
@@ -74,7 +56,6 @@ class ApproxImplicit(Integrator):
         self.rhs = blk.vector(3, model.fp, P)      # h f (+ h^2 J~ v) [kg m/s]
         self.inv_diag = blk.scalar(model.fp, P)           # 1 / (m + h^2 sum k) [1/kg]
         self.dv = blk.vector(3, model.fp, (2, P))  # ping-pong Jacobi iterates [m/s]; row 0 keeps the last dv
-        self.dv_solved = blk.vector(3, model.fp, P) if self.options["multigrid_cycles"] else None
         blk.finalize(self)
         # sweeps and warm start are fixed per integrator: the sweeps unroll into one kernel (one launch per step)
         self.warm = bool(self.options["warm_start"])
@@ -84,45 +65,13 @@ class ApproxImplicit(Integrator):
     def reset(self) -> None:
         self.dv.fill(0)
 
-    # ------------------------------------------------------------------ multigrid (multilevel cloths only)
     def unstable_advice(self) -> str | None:
         if self.options["sweeps"] > 2 and not self.options["jv_term"]:
             return "more than 2 sweeps need jv_term = true"
         return None
 
-    @property
-    def needs_levels(self) -> bool:
-        return self.options["multigrid_cycles"] > 0
-
-    def attach_levels(self, nested, why: str | None) -> None:
-        """Build the multigrid solver over the cloth's nested 4-8 levels (linear.NestedLevels: the hierarchy's
-        levels, ClothData and pins per level, the current level). ValueError where there are none (`why` says why)
-        or the cloth is a garment."""
-        from multilevel.multigrid import LevelOperator, MultigridSolver
-
-        if nested is not None and nested.garment:
-            why = "cannot sew a garment: its pieces apart are on none of its 4-8 levels"
-        try:
-            if why is not None:
-                raise ValueError(why)
-            ops = [LevelOperator(d.mass, d.springs, d.stiffness, p) for d, p in zip(nested.cloth, nested.pinned)]
-            self.multigrid = MultigridSolver(nested.hierarchy, ops, fp=self.model.fp)
-        except ValueError as err:
-            raise ValueError(f"with multigrid_cycles {err}") from None
-        self.multigrid.set_active_level(nested.start)
-
-    def topology_changed(self, level: int | None = None) -> None:
-        self.reset()
-        if self.multigrid is not None and level is not None:
-            self.multigrid.set_active_level(level)
-
     def _advance(self, dt: float) -> None:
-        if self.multigrid is None:
-            self._sweeps(dt)
-            return
-        self._prepare(dt)
-        self.multigrid.solve(self.rhs, self.dv_solved, dt, self.options["multigrid_cycles"])
-        self._finish(dt)
+        self._sweeps(dt)
 
     @ti.func
     def _system_row(self, i, h):
@@ -134,30 +83,6 @@ class ApproxImplicit(Integrator):
             for e in range(m.adj_offset[i], m.adj_offset[i + 1]):
                 jv += m.stiffness[m.adj_spring[e]] * (s.v[m.adj_other[e]] - s.v[i])
         return h * f + h * h * jv, 1.0 / (m.mass[i] + h * h * m.stiffness_sum[i])
-
-    @ti.kernel
-    def _prepare(self, dt: ti.f64):
-        m = self.model
-        h = ti.cast(dt, m.fp)
-        ti.loop_config(serialize=self.model.serial)
-        for i in range(m.n_particles[None]):
-            zero = ti.Vector.zero(m.fp, 3)
-            self.dv_solved[i] = zero
-            self.rhs[i] = zero
-            if m.inv_mass[i] != 0:
-                rhs, inv_diag = self._system_row(i, h)
-                self.rhs[i] = rhs
-                self.inv_diag[i] = inv_diag
-
-    @ti.kernel
-    def _finish(self, dt: ti.f64):
-        m, s = self.model, self.state
-        h = ti.cast(dt, m.fp)
-        ti.loop_config(serialize=self.model.serial)
-        for i in range(m.n_particles[None]):
-            if m.inv_mass[i] != 0:
-                s.v[i] += self.contact_filter(i, self.dv_solved[i])
-                s.x[i] += h * s.v[i]
 
     # ------------------------------------------------------------------ the paper's Jacobi sweeps
     @ti.kernel

@@ -35,13 +35,12 @@ GARMENT_LEVELS = False
 class NestedLevels:
     """A cloth's nested 4-8 levels (global refinement).
 
-    hierarchy: the multilevel Level list (0 = coarsest); cloth: the ClothData of every level; pinned: (n_l,) bool
-    per level; start: the level the model is on (None: on none of them, a garment's pieces apart before their seams
-    merge); garment: whether the cloth is a garment."""
+    hierarchy: the multilevel Level list (0 = coarsest); cloth: the ClothData of every level; start: the level the
+    model is on (None: on none of them, a garment's pieces apart before their seams merge); garment: whether the
+    cloth is a garment (the pins are read from the model's inverse masses at every prepare)."""
 
     hierarchy: list
     cloth: list
-    pinned: list
     start: int | None
     garment: bool
 
