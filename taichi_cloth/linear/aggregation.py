@@ -53,10 +53,8 @@ def aggregate(n: int, ends: np.ndarray) -> np.ndarray:
     """(n,) int64 aggregate of every vertex of a graph with n vertices and (E, 2) edges `ends` (numbered from 0)."""
     ends = np.asarray(ends, np.int64).reshape(-1, 2)
     both = np.concatenate([ends, ends[:, ::-1]])
-    order = np.lexsort((both[:, 1], both[:, 0]))
-    nbr = both[order, 1]
-    ptr = np.zeros(n + 1, np.int64)
-    np.cumsum(np.bincount(both[:, 0], minlength=n), out=ptr[1:])
+    both = both[np.argsort(both[:, 1], kind="stable")]  # every vertex's neighbours in increasing order
+    ptr, nbr = csr(both[:, 0], n, both[:, 1])
     agg = np.full(n, -1, np.int64)
     count = 0
     for i in range(n):  # roots: a free vertex with all its neighbours free takes them all

@@ -1,5 +1,6 @@
 """Preconditioned conjugate gradients on the filtered block system (Baraff and Witkin 1998's modified PCG): solves
-S A S x = S b for x in range(S), on the device, with one host read per solve.
+S A S x = S b for x in range(S). The convergence test is decided on the device: the host reads only whether CG
+goes on, once per launch.
 
 The preconditioner is either inline (`inline = True`: a Taichi function `precondition(i, r)` evaluated inside the
 CG kernels, CHUNK iterations unrolled per launch) or applied by its own kernels (`apply(r, z)` once per iteration,
@@ -19,8 +20,8 @@ class PCG:
 
     b, x, r, z, p, q: (P,) vec3 fields of the model's precision: the right-hand side [kg m/s], the solution and
     start [m/s] (the caller writes both), the residual, the preconditioned residual, the direction and A p.
-    The scalars (0-d float64 fields, kept on the device): rz = r.z of the last look, rz_b = b.z_b, threshold =
-    tolerance^2 rz_b, beta, active (1 while iterating), iterations, max_iterations.
+    The scalars, kept on the device: rz = r.z of the last look, rz_b = b.z_b, threshold = tolerance^2 rz_b and beta
+    (0-d float64 fields); active (1 while iterating), iterations and max_iterations (0-d int32 fields).
     """
 
     #: CG iterations unrolled into one kernel launch with an inline preconditioner; iterations past convergence
