@@ -74,14 +74,6 @@ class Integrator:
             out = self.contacts.filter(i, vec)
         return out
 
-    @ti.func
-    def contact_projector(self, i):
-        """The 3x3 filter S_i of particle i as a matrix: 0 when stuck, I - n n^T on a contact, else I."""
-        out = ti.Matrix.identity(self.model.fp, 3)
-        if ti.static(self.has_contacts):
-            out = self.contacts.projector(i)
-        return out
-
     def step(self, dt: float) -> None:
         """Advance the state by dt [s]: forces are prepared for time t, then the scheme's own update."""
         self.forces.prepare(self.state.t)

@@ -248,7 +248,7 @@ class Implicit(Integrator):
                 v = self.v0[i] + self.dv_total[i]
                 s.v[i] = v
                 s.x[i] = self.x0[i] + h * v * ti.cast(1 - first, m.fp)
-                self.dv[i] = self.contact_filter(i, guess) * ti.cast(self.warm[None] * first, m.fp)
+                self.dv[i] = self.filter.apply(i, guess) * ti.cast(self.warm[None] * first, m.fp)
             else:
                 self.dv[i] = ti.Vector.zero(m.fp, 3)
         ti.loop_config(serialize=self.model.serial)
@@ -266,7 +266,7 @@ class Implicit(Integrator):
                         dvel = s.v[i] - s.v[m.adj_other[e]]
                         kv += (sy.axial[sp] - h * m.damping[sp]) * u.dot(dvel) * u \
                             + (sy.iso[sp] - h * m.viscous[sp]) * dvel
-                b = self.contact_filter(i, h * fm.particle_force(i, True) - kv - m.mass[i] * self.dv_total[i])
+                b = self.filter.apply(i, h * fm.particle_force(i, True) - kv - m.mass[i] * self.dv_total[i])
             self.b[i] = b
 
     @ti.func
