@@ -64,7 +64,8 @@ and a component whose table is absent is never built. The schema (units in brack
                                   # max_force [N] = 5 (cap per pair), stiffness [N/m] (default sheet modulus / 2),
                                   # epsilon [m] = 0.002 and energy_tolerance = 0.01 (when sewing stops), gravity =
                                   # false (while sewing), join = "merge" | "spring" | "none", join_stiffness [N/m],
-                                  # max_time [s] = 10
+                                  # max_time [s] = 10, stall_gap = 0.25 (a stalled seam closes below this
+                                  # fraction of the seam spacing)
     [body]                        # morph the mannequin to measured girths [m] (taichi_cloth.body; Zhang et al. 2017):
     waist = 0.80                  # any of chest, underbust, waist, hips, neck, upper_arm, thigh (tape girths)
     morph = "before"              # "before": the run starts on the morphed body (a garment is placed on it);
@@ -160,7 +161,7 @@ SCHEMA = Table({
                      "epsilon": Field("number", 0.002, positive), "energy_tolerance": Field("number", 1e-2, positive),
                      "gravity": Field("bool", False), "join": Field("str", "merge", choices=("merge", "spring", "none")),
                      "join_stiffness": Field("number", None, positive), "max_time": Field("number", 10.0, positive),
-                     "stiffness": Field("number", None, positive)}),
+                     "stall_gap": Field("number", 0.25, positive), "stiffness": Field("number", None, positive)}),
     "body": Table({**{g: Field("number", None, positive) for g in BODY_GIRTHS},
                    "morph": Field("str", "before", choices=("before", "during")),
                    "morph_time": Field("number", 1.0, positive), "tolerance": Field("number", 1e-3, positive)}),
