@@ -1,7 +1,7 @@
 """taichi-cloth: mass-spring cloth on Taichi kernels.
 
-Life cycle: ClothBuilder -> ClothData -> Model (fields) -> State -> Integrator.step(dt), composed by a
-Scene (the only time loop, with the controllers a scene names), recorded by a Recorder. Units are SI throughout
+Life cycle: ClothBuilder -> ClothData -> Model (fields) -> State -> Integrator.step(state, contacts, dt) after the
+collision stage (Colliders), composed by a Scene (the only time loop, with the controllers a scene names), recorded by a Recorder. Units are SI throughout
 (m, kg, s, N).
 
     import taichi_cloth as tc

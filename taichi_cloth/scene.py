@@ -1,7 +1,9 @@
 """Scene: the only time loop. It holds a model, a state, an integrator, a step clock and the controllers the scene
 names (taichi_cloth.control), and knows none of them by name.
 
-Per step: every controller's before_step, the integrator's step, every controller's after_step. Per frame: the
+Per step (Scene.substep): every controller's before_step, the collision stage's begin, the integrator's
+step(state, contacts, dt), every controller's after_step, and the collision stage (taichi_cloth.colliders), which
+pushes the particles out and writes the contacts the next step reads. Per frame: the
 clock plans the frame's steps, one measurement (energy, strain, blow-up check), every controller's after_frame,
 whose model changes are applied in one place (Scene.apply), and, when recording, one read-only snapshot for the
 recorder. A blow-up stops the run with a BlowUpError that names the integrator, the step and a stable step size;
@@ -37,8 +39,10 @@ class Scene:
     draped). `options` are those of taichi_cloth.assembly.assemble (integrator, dt, gravity, pins, colliders,
     stretch_limit, wind, multilevel, sewing, body_morph...): it builds the parts and only what they name.
 
-    model, state, forces, integrator: the parts; clock: the step clock (taichi_cloth.clock); controllers: the
-    features, in the order their hooks run (Scene.controller(name) finds one); warnings: lines for the summary.
+    model, state, forces, integrator: the parts; contacts: the Contacts the collision stage writes and the
+    integrator reads (None without colliders); collision: the collision stage (taichi_cloth.colliders.Colliders, or
+    None); clock: the step clock (taichi_cloth.clock); controllers: the features, in the order their hooks run
+    (Scene.controller(name) finds one); warnings: lines for the summary.
     """
 
     def __init__(self, cloth, **options):
@@ -46,6 +50,7 @@ class Scene:
         self.name = parts.name
         self.model, self.state, self.forces = parts.model, parts.state, parts.forces
         self.integrator, self.clock = parts.integrator, parts.clock
+        self.contacts, self.collision = parts.contacts, parts.collision
         self.controllers = list(parts.controllers)
         self.max_speed, self.max_strain = parts.max_speed, parts.max_strain
         self.warnings: list[str] = list(parts.warnings)
@@ -72,6 +77,8 @@ class Scene:
         self._record = hooks("record", self.controllers)
         # substeps fused into the integrator's kernels where nothing between them needs the host
         inline = [c.inline_step() for c in stepping if overrides(c, "before_step") or overrides(c, "after_step")]
+        if self.collision is not None:
+            inline.append(self.collision.inline_step())
         self._fused = all(x is not None for x in inline) and self.integrator.fuse(tuple(o for x in inline for o in x))
 
     def add_controller(self, controller) -> None:
@@ -116,19 +123,30 @@ class Scene:
         self._advance(n, self.clock.dt)
 
     def _advance(self, n: int, dt: float) -> None:
-        state, integrator = self.state, self.integrator
         if self._fused:
-            integrator.advance_fused(n, dt)
+            self.integrator.advance_fused(self.state, self.contacts, n, dt)
             self.steps_taken += n
             return
-        before, after = self._before_step, self._after_step
         for _ in range(n):
-            for hook in before:
-                hook(state.t, dt)
-            integrator.step(dt)
-            for hook in after:
-                hook(state.t, dt)
-            self.steps_taken += 1
+            self.substep(dt)
+
+    def substep(self, dt: float, observe=None) -> None:
+        """One step of dt [s] as a run takes it, unfused: the controllers' before_step, the collision stage's begin,
+        the integrator's step(state, contacts, dt), the controllers' after_step, the collision stage. observe: a
+        callable of no argument, called right after the integrator's step (what the integrator alone did)."""
+        state, contacts, collision = self.state, self.contacts, self.collision
+        for hook in self._before_step:
+            hook(state.t, dt)
+        if collision is not None:
+            collision.begin(state, contacts)
+        self.integrator.step(state, contacts, dt)
+        if observe is not None:
+            observe()
+        for hook in self._after_step:
+            hook(state.t, dt)
+        if collision is not None:
+            collision.collide(state, contacts, dt)
+        self.steps_taken += 1
 
     def step(self, n: int = 1) -> Measurement:
         """Advance n steps, then measure and check for a blow-up (raises BlowUpError). Returns the measurement."""

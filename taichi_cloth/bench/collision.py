@@ -45,9 +45,9 @@ def _record(n: int, settle: float, steps: int):
     for _ in range(steps):
         x0 = scene.positions()
         body.begin_step()
-        scene.integrator.step(scene.dt)  # the integrator alone: its end state is what collision must resolve
+        scene.integrator.step(scene.state, scene.contacts, scene.dt)  # alone: its end state is what collision resolves
         frames.append((x0, scene.positions(), scene.velocities()))
-        scene.state.contacts.clear()
+        scene.contacts.clear()
         body.resolve(scene.dt)
     return scene, (v, t), frames
 
@@ -58,7 +58,7 @@ def _time_integrator(scene, steps: int) -> float:
     per = []
     for _ in range(steps):
         t0 = time.perf_counter()
-        scene.integrator.step(scene.dt)
+        scene.integrator.step(scene.state, scene.contacts, scene.dt)
         ti.sync()
         per.append(1e3 * (time.perf_counter() - t0))
     return statistics.median(per)
@@ -98,9 +98,10 @@ def run(args) -> int:
         implicit_ms = _time_integrator(scene, 4)
         from ..integrators import ApproxImplicit
 
-        approx = ApproxImplicit(scene.model, scene.state, scene.forces)
-        approx.step(scene.dt)
-        approx_ms = statistics.median([_timed(lambda: approx.step(scene.dt)) for _ in range(8)])
+        approx = ApproxImplicit(scene.model, scene.state, scene.forces, contacts=scene.contacts)
+        approx.step(scene.state, scene.contacts, scene.dt)
+        approx_ms = statistics.median([_timed(lambda: approx.step(scene.state, scene.contacts, scene.dt))
+                                       for _ in range(8)])
         mean_edge = scene.controller("colliders").objects[0].mean_edge
         for factor in args.cells:
             for mode, gate in (("fuzzy", True), ("exact", True), ("fuzzy", False)):
