@@ -82,6 +82,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from .assembly import STEP_GUARDS
+from .body.landmarks import Body
 from .builder import ClothBuilder
 from .errors import MeshError, PatternError, SceneError
 from .guards import check_memory, check_precision, grid_particles
@@ -351,8 +352,6 @@ def _body(table: dict, colliders: list, label: str):
         raise SceneError(f"{label}: [body]: {exc}") from None
     if table["morph"] == "during":
         return None, {"weights": fit.weights, "duration": table["morph_time"]}, colliders
-    from .garment.placement import Body
-
     morphed = [dict(c, vertices=fit.vertices, triangles=fit.triangles, path="mannequin (fitted)")
                if c["type"] == "mesh" and c.get("path") == "mannequin" else c for c in colliders]
     return Body.from_mesh(fit.vertices, fit.triangles), None, morphed

@@ -23,12 +23,12 @@ import numpy as np
 from clothbase.meshes import edges_of
 from multilevel.hierarchy import Hierarchy48, Level, identity_tables
 
+from ..body.landmarks import Body
 from ..cloth import ClothData
 from ..errors import PatternError
 from ..multilevel_cloth import MultilevelCloth
 from .garment import GarmentCloth, GarmentLevelPlan, GarmentSpec, plan_garment_levels
 from .mesh import level_mesh
-from .placement import Body
 from .sewing import merge_seams
 
 
