@@ -53,7 +53,7 @@ def hang(tc, integrator, opts, dt=0.01, steps=600):
 
 
 def ms_per_step(tc, opts):
-    from taichi_cloth.bench.integrators import hanging_cloth, time_scene
+    from benchmarks.integrators import hanging_cloth, time_scene
 
     return time_scene(hanging_cloth(128, "approx-implicit", **opts), 10)["ms_per_step"]
 

@@ -185,7 +185,8 @@ def _cmd_info(args) -> int:
     return 0
 
 
-#: `bench SUITE`: modules of taichi_cloth.bench, each with add_arguments(parser) and run(args) -> exit code
+#: `bench SUITE`: modules of the top-level benchmarks package, each with add_arguments(parser) and run(args) -> exit
+#: code (benchmarks imports the engine, never the other way: the suites are found by name)
 SUITES = ("integrators", "collision", "tradeoff", "stability", "peers")
 
 
@@ -211,7 +212,7 @@ def main(argv=None) -> int:
     p_bench = sub.add_parser("bench", help="benchmarks: `bench [integrators]`, `bench " + "`, `bench ".join(SUITES[1:]) + "`")
     suites = p_bench.add_subparsers(dest="suite", required=True)
     for name in SUITES:
-        module = importlib.import_module(f".bench.{name}", __package__)
+        module = importlib.import_module(f"benchmarks.{name}")
         p_suite = suites.add_parser(name, help=module.__doc__.strip().splitlines()[0],
                                     description=module.__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
         module.add_arguments(p_suite)

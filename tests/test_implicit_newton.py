@@ -4,7 +4,7 @@ cloth released from rest. One linearised solve per step (the classical implicit 
 import numpy as np
 import pytest
 
-from taichi_cloth.bench.tradeoff import SCENES, energy_scale
+from taichi_cloth.study_scenes import SCENES, energy_scale
 
 
 def largest_rise_of_the_step(scene_name: str, dt: float, seconds: float, **options) -> tuple[float, object]:

@@ -103,7 +103,7 @@ class TaichiExample:
               "ball_radius", "ball_center", "gravity", "spring_offsets")
 
     def __init__(self, n: int, dt: float):
-        from .. import runtime
+        from taichi_cloth import runtime
 
         runtime.ensure_initialized()
         src = headless_source(n, dt)
@@ -212,7 +212,7 @@ class ExamplePhysics:
         """The example as ClothData: start `positions` (P,3) [m] (default start_positions()), rest lengths from
         the grid (not from the start, which may be deformed), k = spring_Y / L0, kd = dashpot_damping x
         quad_size, 1 kg particles, the example's triangles."""
-        from ..cloth import ClothData, SpringKind
+        from taichi_cloth.cloth import ClothData, SpringKind
 
         n, q = self.n, self.quad_size
         x = self.start_positions() if positions is None else np.asarray(positions, np.float64)
@@ -238,7 +238,7 @@ class ExamplePhysics:
               positions: np.ndarray | None = None, ball: bool = True, name: str = "peers"):
         """Our Scene of the example: `integrator` at step dt [s], drag rate drag_damping as our linear
         air_damping, the ball as a sphere collider (unless ball=False), step guard off (the caller chooses)."""
-        from ..scene import Scene
+        from taichi_cloth.scene import Scene
 
         return Scene(self.cloth(positions), name=name, integrator=integrator, dt=dt,
                      integrator_options=dict(options or {}), gravity=self.gravity, air_damping=self.drag_damping,

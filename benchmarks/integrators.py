@@ -42,8 +42,8 @@ def add_arguments(p) -> None:
 def hanging_cloth(n: int, integrator: str, material: str = "cotton", dt: float | None = None, **options):
     """The benchmark scene: a 1 m square sheet of n x n particles pinned at its two top corners. dt [s] defaults
     to 1/60 s for the unconditionally stable integrators and 0.9 x the stable bound for the explicit ones."""
-    from ..builder import ClothBuilder
-    from ..scene import Scene
+    from taichi_cloth.builder import ClothBuilder
+    from taichi_cloth.scene import Scene
 
     cloth = ClothBuilder.grid((1.0, 1.0), (n, n), material, center=(0.0, 1.0, 0.0), plane="xy")
     top = [n * (n - 1), n * n - 1]
@@ -57,7 +57,7 @@ def hanging_cloth(n: int, integrator: str, material: str = "cotton", dt: float |
 def multigrid_cloth(n: int, material: str = "cotton"):
     """The benchmark sheet as a 4-8 hierarchy on its finest level, (n+1) x (n+1) particles, for the implicit
     integrator's multigrid preconditioner; None unless n = b x 2^j cells, b in 2, 3, 4, 8 and j >= 1."""
-    from ..multilevel_cloth import multilevel_grid
+    from taichi_cloth.multilevel_cloth import multilevel_grid
 
     for base in (4, 3, 2, 8):  # 8 x 2^5 = 256 cells: 4 x 2^6 would need 13 levels, one more than a hierarchy holds
         j = (n // base).bit_length() - 1
@@ -69,7 +69,7 @@ def multigrid_cloth(n: int, material: str = "cotton"):
 
 def hanging_multigrid(n: int, material: str = "cotton"):
     """hanging_cloth's scene on multigrid_cloth(n) (pinned at its two top corners, h = 1/60 s), or None."""
-    from ..scene import Scene
+    from taichi_cloth.scene import Scene
 
     cloth = multigrid_cloth(n, material)
     if cloth is None:
@@ -87,7 +87,7 @@ def time_scene(scene, steps: int, blocks: int = 5) -> dict:
 
     import taichi as ti
 
-    from ..errors import BlowUpError
+    from taichi_cloth.errors import BlowUpError
 
     t0 = time.perf_counter()
     scene.advance(1)
@@ -115,7 +115,7 @@ def time_scene(scene, steps: int, blocks: int = 5) -> dict:
 
 def time_recorder(scene, out: Path, frames: int = 10) -> float:
     """ms per recorded frame (positions + normals + scalars) for this scene's cloth."""
-    from ..recorder import Recorder
+    from taichi_cloth.recorder import Recorder
 
     with Recorder(out / "recorder_timing.rrd", overwrite=True) as rec:
         rec.begin_cloth("cloth", scene.layout())
@@ -179,8 +179,8 @@ def garment_scene(path, preconditioner: str, frames: int = 90):
     """The garment scene file at `path` with the implicit integrator, `preconditioner` and CG to the integrator's
     default tolerance (1e-3; the T-shirt demo's 1e-2 leaves its seams a few tenths of a millimetre short of joining
     with the aggregation multigrid), run for `frames` frames (the T-shirt's seams join after about 0.75 s)."""
-    from ..integrators.implicit import Implicit
-    from ..scenefile import load_scene
+    from taichi_cloth.integrators.implicit import Implicit
+    from taichi_cloth.scenefile import load_scene
 
     tolerance = Implicit.OPTIONS["cg_tolerance"].default
     scene = load_scene(path, integrator="implicit",
@@ -211,8 +211,8 @@ def _scenes(args, names):
 
 
 def run(args) -> int:
-    from .. import runtime
-    from ..integrators import INTEGRATORS
+    from taichi_cloth import runtime
+    from taichi_cloth.integrators import INTEGRATORS
 
     runtime.init(args.arch, kernel_profiler=args.kernel_shares)
     names = args.integrators or list(INTEGRATORS)

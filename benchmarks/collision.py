@@ -31,9 +31,9 @@ def add_arguments(p) -> None:
 
 
 def _record(n: int, settle: float, steps: int):
-    from ..builder import ClothBuilder
-    from ..colliders import body_mesh
-    from ..scene import Scene
+    from taichi_cloth.builder import ClothBuilder
+    from taichi_cloth.colliders import body_mesh
+    from taichi_cloth.scene import Scene
 
     v, t = body_mesh("mannequin")
     cloth = ClothBuilder.grid((1.2, 1.2), (n, n), "silk", center=(0.0, 1.73, 0.06), plane="xz")
@@ -85,7 +85,7 @@ def _replay(collider, scene, frames) -> tuple[float, dict]:
 def run(args) -> int:
     from collision import MeshCollider
 
-    from .. import runtime
+    from taichi_cloth import runtime
 
     runtime.init(args.arch)
     out = Path(args.out)
@@ -96,7 +96,7 @@ def run(args) -> int:
         scene, (v, t), frames = _record(n, args.settle, args.steps)
         print(f"{n}x{n}: recorded {len(frames)} steps after {args.settle} s ({time.perf_counter() - t0:.0f} s)", flush=True)
         implicit_ms = _time_integrator(scene, 4)
-        from ..integrators import ApproxImplicit
+        from taichi_cloth.integrators import ApproxImplicit
 
         approx = ApproxImplicit(scene.model, scene.state, scene.forces, contacts=scene.contacts)
         approx.step(scene.state, scene.contacts, scene.dt)

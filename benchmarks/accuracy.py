@@ -79,7 +79,7 @@ def run_sampled(scene, times, warm_up: bool = True, progress=None) -> Trajectory
     so an unstable configuration stops within a frame of going wrong. With `warm_up`, one step is taken first
     and the scene reset, so the kernels are compiled (or loaded) before the clock starts. `progress`, when
     given, is called with the simulated time after every frame."""
-    from ..errors import BlowUpError
+    from taichi_cloth.errors import BlowUpError
 
     times = np.asarray(times, dtype=np.float64)
     if warm_up:
