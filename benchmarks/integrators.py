@@ -115,15 +115,16 @@ def time_scene(scene, steps: int, blocks: int = 5) -> dict:
 
 def time_recorder(scene, out: Path, frames: int = 10) -> float:
     """ms per recorded frame (positions + normals + scalars) for this scene's cloth."""
+    from taichi_cloth.frame import scene_layout, scene_snapshot
     from taichi_cloth.recorder import Recorder
 
     with Recorder(out / "recorder_timing.rrd", overwrite=True) as rec:
-        rec.begin_cloth("cloth", scene.layout())
+        rec.begin_cloth("cloth", scene_layout(scene))
         m = scene.measure()
-        rec.log_frame("cloth", scene.snapshot(0, m))
+        rec.log_frame("cloth", scene_snapshot(scene, 0, m))
         t0 = time.perf_counter()
         for f in range(1, frames + 1):
-            rec.log_frame("cloth", scene.snapshot(f, m))  # the snapshot (a copy out of the fields) is part of the cost
+            rec.log_frame("cloth", scene_snapshot(scene, f, m))  # the snapshot (a copy out of the fields) is part of the cost
         ms = 1e3 * (time.perf_counter() - t0) / frames
     (out / "recorder_timing.rrd").unlink(missing_ok=True)
     return ms

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import meshio
 import numpy as np
 
 from .errors import MeshError, warn
@@ -161,6 +162,16 @@ def repair_triangle_mesh(vertices, triangles, source: str = "mesh"):
         warn(f"{source}: repaired: " + "; ".join(done))
     validate_triangle_mesh(v, t, source)
     return v, t
+
+
+def write_triangle_mesh(path: str | Path, vertices: np.ndarray, triangles: np.ndarray) -> Path:
+    """Write vertices (V,3) [m] and triangles (T,3) with meshio, the format by suffix (.obj, .ply, .vtk...); without
+    triangles, the vertices as a point cloud. Returns the path."""
+    path = Path(path)
+    cells = ([("triangle", np.asarray(triangles, dtype=np.int32))] if len(triangles)
+             else [("vertex", np.arange(len(vertices), dtype=np.int32)[:, None])])
+    meshio.write(path, meshio.Mesh(vertices, cells))
+    return path
 
 
 def load_triangle_mesh(path: str | Path, scale: float = 1.0, translate=(0.0, 0.0, 0.0), repair: bool = False):

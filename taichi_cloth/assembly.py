@@ -18,12 +18,13 @@ from .adaptive import AdaptiveOptions, AdaptiveStep
 from .clock import FixedStep
 from .colliders import Colliders, build_colliders
 from .contacts import Contacts
+from .diagnostics import Diagnostics
 from .errors import SceneError
 from .forces import ForceModel
 from .integrators import integrator_class
 from .model import Model, State
 from .pins import Pins, PinSpec, pinned_mask
-from .rest import RestCriterion
+from .rest import RestCriterion, RestMonitor
 from .stability import omega_max_estimate, stable_dt
 from .stretch_limit import StretchLimit
 from .wind import Wind
@@ -51,7 +52,8 @@ class SceneParts:
     warnings: list = field(default_factory=list)
     max_speed: float = 200.0
     max_strain: float = 10.0
-    rest: RestCriterion = field(default_factory=RestCriterion)
+    rest: RestMonitor | None = None  # when the cloth counts as at rest
+    diagnostics: Diagnostics | None = None  # the per-frame measurement
     stop_at_rest: bool = False
 
 
@@ -160,9 +162,13 @@ def assemble(cloth, *, name: str = "cloth", integrator: str = DEFAULT_INTEGRATOR
 
     _check_step(step_guard, stepper, model, forces, clock, source, specs, refiner, parts_warnings)
     controllers = [c for c in (refiner, morph, pin_control, sew, limit, collide, strain_map) if c is not None]
+    d = model.data
+    weight = float(d.mass.sum()) * max(float(np.linalg.norm(forces.gravity_value)), 9.81)
+    monitor = RestMonitor(rest_criterion, weight * float(np.linalg.norm(np.ptp(d.positions, axis=0))))
+    diagnostics = Diagnostics(model, state, forces, rest_criterion.p99_speed, stepper.staggered_velocity)
     return SceneParts(name, model, state, forces, stepper, clock, controllers, contacts, collide,
                       wind_source.normals if wind_source is not None else None, parts_warnings,
-                      float(max_speed), float(max_strain), rest_criterion, stop_at_rest)
+                      float(max_speed), float(max_strain), monitor, diagnostics, stop_at_rest)
 
 
 def _rest(options: dict | None) -> tuple[RestCriterion, bool]:

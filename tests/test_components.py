@@ -4,6 +4,7 @@ import pytest
 import taichi as ti
 
 import taichi_cloth as tc
+from taichi_cloth.frame import scene_snapshot
 
 
 def names(counter):
@@ -107,7 +108,7 @@ def test_a_feature_is_a_controller_added_without_touching_the_loop():
     assert sc.controller("zero_g") is zero_g
     summary = sc.run(5, progress=False)
     assert zero_g.steps == 10 and zero_g.frames == [1, 2, 3, 4, 5] and summary.events == ["gravity off"]
-    assert sc.snapshot(5, sc.measure()).scalars["zero_g/steps"] == 10
+    assert scene_snapshot(sc, 5, sc.measure()).scalars["zero_g/steps"] == 10
     v = sc.velocities()  # free flight from frame 3 on: every particle keeps its velocity (drag aside)
     sc.run(1, progress=False)
     np.testing.assert_allclose(sc.velocities(), v * (1 - 0.1 / 120) ** 2, rtol=1e-3, atol=1e-5)
