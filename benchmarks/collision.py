@@ -18,6 +18,15 @@ import statistics
 import time
 from pathlib import Path
 
+import taichi as ti
+
+from collision import MeshCollider
+from taichi_cloth import runtime
+from taichi_cloth.builder import ClothBuilder
+from taichi_cloth.colliders import body_mesh
+from taichi_cloth.integrators import ApproxImplicit
+from taichi_cloth.scene import Scene
+
 CELL_FACTORS = (0.75, 1.0, 1.5, 2.0, 3.0, 4.0)  # x the mannequin's mean edge
 
 
@@ -31,10 +40,6 @@ def add_arguments(p) -> None:
 
 
 def _record(n: int, settle: float, steps: int):
-    from taichi_cloth.builder import ClothBuilder
-    from taichi_cloth.colliders import body_mesh
-    from taichi_cloth.scene import Scene
-
     v, t = body_mesh("mannequin")
     cloth = ClothBuilder.grid((1.2, 1.2), (n, n), "silk", center=(0.0, 1.73, 0.06), plane="xz")
     scene = Scene(cloth, integrator="implicit", dt=1 / 120, air_damping=0.3, integrator_options={"cg_tolerance": 1e-2},
@@ -53,8 +58,6 @@ def _record(n: int, settle: float, steps: int):
 
 
 def _time_integrator(scene, steps: int) -> float:
-    import taichi as ti
-
     per = []
     for _ in range(steps):
         t0 = time.perf_counter()
@@ -65,8 +68,6 @@ def _time_integrator(scene, steps: int) -> float:
 
 
 def _replay(collider, scene, frames) -> tuple[float, dict]:
-    import taichi as ti
-
     collider.attach(scene.state.x, scene.state.v, scene.model.inv_mass, scene.model.n_particles)
     collider.reset_counters()
     per = []
@@ -83,10 +84,6 @@ def _replay(collider, scene, frames) -> tuple[float, dict]:
 
 
 def run(args) -> int:
-    from collision import MeshCollider
-
-    from taichi_cloth import runtime
-
     runtime.init(args.arch)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -96,7 +93,6 @@ def run(args) -> int:
         scene, (v, t), frames = _record(n, args.settle, args.steps)
         print(f"{n}x{n}: recorded {len(frames)} steps after {args.settle} s ({time.perf_counter() - t0:.0f} s)", flush=True)
         implicit_ms = _time_integrator(scene, 4)
-        from taichi_cloth.integrators import ApproxImplicit
 
         approx = ApproxImplicit(scene.model, scene.state, scene.forces, contacts=scene.contacts)
         approx.step(scene.state, scene.contacts, scene.dt)
@@ -125,8 +121,6 @@ def run(args) -> int:
 
 
 def _timed(fn) -> float:
-    import taichi as ti
-
     t0 = time.perf_counter()
     fn()
     ti.sync()

@@ -54,8 +54,17 @@ import warnings
 from pathlib import Path
 
 import numpy as np
+import taichi as ti
 
+from taichi_cloth import runtime
+from taichi_cloth.errors import BlowUpError
+
+from . import peer_warp
 from .accuracy import Trajectory, compare, pareto_front, run_sampled
+from .peer_taichi_example import ExamplePhysics, ExampleUnavailable, TaichiExample, run_example
+from .peer_taichi_example import __doc__ as example_doc
+from .peer_warp import (EXAMPLE_INTEGRATORS, WARP_VERSION, ShippedExample, WarpSamePhysics, run_same_physics,
+                        warp_status)
 
 START_OFFSET = (0.03, 0.01)  # [m] x, z: the example's random start offset (uniform in +-0.05 m), fixed
 REFERENCE_OPTIONS = {"cg_tolerance": 1e-7, "cg_max_iterations": 1000}
@@ -150,8 +159,6 @@ def reference(physics, start: np.ndarray, times: np.ndarray, h: float, cache: Pa
 def _warm(scene, dt: float) -> None:
     """One frame at dt [s], then reset: the scene's kernels are compiled and the threads awake before the clock
     of the first configuration starts (the first timed run of a process was up to 2x slow without it)."""
-    from taichi_cloth.errors import BlowUpError
-
     scene.dt = dt
     scene.reset()
     try:
@@ -192,8 +199,6 @@ def _ladder(run_at, start_dt: float, spacing: float, label: str, log) -> list[di
 # ---------------------------------------------------------------------------------------------- one size
 def measure_size(n: int, args, warp_reason: str | None, warp_example_reason: str | None, log) -> tuple[list, dict]:
     """Every configuration at size n: (rows, reference info)."""
-    from .peer_taichi_example import ExamplePhysics, ExampleUnavailable, TaichiExample, run_example
-
     spacing = args.sim_time / args.samples
     times = spacing * np.arange(1, args.samples + 1)
     progress = not args.no_progress
@@ -260,8 +265,6 @@ def measure_size(n: int, args, warp_reason: str | None, warp_example_reason: str
 
     # ---- Warp, the same physics
     if warp_reason is None:
-        from .peer_warp import WarpSamePhysics, run_same_physics
-
         for integ, start_dt, label in (("semi-implicit", 4 * explicit_bound, "4 x our bound"),
                                        ("xpbd", spacing / 4, "spacing/4")):
             sim = WarpSamePhysics(physics, integ, spacing, iterations=1, start=start)
@@ -275,8 +278,6 @@ def measure_size(n: int, args, warp_reason: str | None, warp_example_reason: str
 
     # ---- Warp's own example, as shipped (its scene: cost only)
     if warp_example_reason is None:
-        from .peer_warp import EXAMPLE_INTEGRATORS, ShippedExample
-
         for integ in EXAMPLE_INTEGRATORS:
             t1 = time.perf_counter()
             shipped = ShippedExample(n, integ, cache_dir=Path(args.out) / "warp_builder_cache")
@@ -351,8 +352,6 @@ def _row_text(r: dict) -> str:
 
 def report(rows: list[dict], infos: dict, settings: dict, skipped: list[str]) -> str:
     """peers.md: settings, reference floors, the ratios, every configuration, the shipped Warp example, notes."""
-    from .peer_taichi_example import __doc__ as example_doc
-
     lines = ["# taichi-cloth against its peers (`bench peers`)", "",
              f"Machine: {settings['machine']}. Taichi {settings['taichi']} on `{settings['arch']}`; "
              f"Warp {settings['warp'] or 'not run'} on the CPU (single-threaded).", "",
@@ -389,7 +388,6 @@ def report(rows: list[dict], infos: dict, settings: dict, skipped: list[str]) ->
     lines += ["", "## Every configuration", "",
               markdown_table([r for r in rows if r["engine"] != WARP_SHIPPED], COLUMNS),
               "", "## How the engines differ", "", "```", example_doc.strip(), "```"]
-    from . import peer_warp
 
     lines += ["", "```", peer_warp.__doc__.strip(), "```"]
     return "\n".join(lines) + "\n"
@@ -438,8 +436,6 @@ def plot(rows: list[dict], infos: dict, path: Path) -> Path | None:
 
 # ---------------------------------------------------------------------------------------------- entry point
 def run(args) -> int:
-    from taichi_cloth import runtime
-
     if not args.sizes or min(args.sizes) < 4:
         print("error: --sizes: every n must be >= 4")
         return 2
@@ -450,7 +446,6 @@ def run(args) -> int:
         print(f"error: --ref-dt: 4 x {args.ref_dt:g} s must fit in the sample spacing "
               f"{args.sim_time / args.samples:g} s")
         return 2
-    from .peer_warp import WARP_VERSION, warp_status
 
     skipped = []
     if args.no_warp:
@@ -464,7 +459,6 @@ def run(args) -> int:
         for line in skipped:
             print(f"skipped: {line}")
     runtime.init(args.arch)
-    import taichi as ti
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

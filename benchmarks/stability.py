@@ -29,6 +29,15 @@ from pathlib import Path
 
 import numpy as np
 
+from taichi_cloth import runtime
+from taichi_cloth.adaptive import AdaptiveOptions
+from taichi_cloth.adaptive import AdaptiveOptions, frame_steps, step_cap
+from taichi_cloth.errors import BlowUpError
+from taichi_cloth.integrators import INTEGRATORS
+from taichi_cloth.stability import omega_max_exact, stable_dt
+from taichi_cloth.stability_probes import critical_step, probe_scene, set_max_stiffness
+from taichi_cloth.stability_probes import probe_run
+
 DEFAULT_STIFFNESS = [1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7]
 DEFAULT_STEPS = [float(f"{10 ** (e / 2):.3g}") for e in range(-10, -1)]  # 1e-5, 3.16e-5, ..., 1e-1
 DEFAULT_RATIOS = [1.0, 1e2, 1e4]
@@ -59,8 +68,6 @@ def add_arguments(p) -> None:
 
 
 def _check(args) -> str | None:
-    from taichi_cloth.integrators import INTEGRATORS
-
     for name in args.integrators or []:
         if name not in INTEGRATORS:
             return f"--integrators: {name!r} is not one of: {', '.join(INTEGRATORS)}"
@@ -78,9 +85,6 @@ def _check(args) -> str | None:
 
 def _outcome(scene, k: float, dt: float, rng, args) -> tuple[str, int | None, str]:
     """Run one cell: ("stable" | "unstable", step caught at or None, reason)."""
-    from taichi_cloth.errors import BlowUpError
-    from taichi_cloth.stability_probes import probe_run
-
     try:
         probe_run(scene, k, dt, rng, steps=args.n_steps, check_every=args.check_every)
         return "stable", None, ""
@@ -101,10 +105,6 @@ def _label(refused: bool, outcome: str) -> str:
 
 def map_integrator(name: str, ratio: float, args, rng) -> tuple[list[dict], list[dict]]:
     """(cells, bounds) of one integrator and mass ratio: a dict per (k, dt) cell and one per k."""
-    from taichi_cloth.adaptive import AdaptiveOptions, frame_steps, step_cap
-    from taichi_cloth.stability import omega_max_exact, stable_dt
-    from taichi_cloth.stability_probes import critical_step, probe_scene, set_max_stiffness
-
     scene = probe_scene(name, ratio)
     cls, air = type(scene.integrator), scene.forces.air_damping_value
     options = AdaptiveOptions() if args.safety is None else AdaptiveOptions(safety=args.safety)
@@ -140,9 +140,6 @@ def map_integrator(name: str, ratio: float, args, rng) -> tuple[list[dict], list
 
 
 def run(args) -> int:
-    from taichi_cloth import runtime
-    from taichi_cloth.integrators import INTEGRATORS
-
     problem = _check(args)
     if problem:
         print(f"error: {problem}", file=sys.stderr)
@@ -165,7 +162,6 @@ def run(args) -> int:
                   + f"; auto step {'all stable' if all(r['auto_outcome'] == 'stable' for r in b) else 'NOT all stable'}"
                   f" ({time.perf_counter() - t0:.1f} s)", flush=True)
     wall = time.perf_counter() - t_start
-    from taichi_cloth.adaptive import AdaptiveOptions
 
     safety = AdaptiveOptions.safety if args.safety is None else args.safety
     text = markdown(cells, bounds, args, wall, safety)

@@ -46,6 +46,10 @@ from pathlib import Path
 
 import numpy as np
 
+from multilevel.hierarchy import Hierarchy48
+from taichi_cloth import runtime
+from taichi_cloth.integrators import integrator_class
+from taichi_cloth.quality import PRESETS_PATH
 from taichi_cloth.study_scenes import SCENES, StudyScene, energy_scale
 
 from .accuracy import Trajectory, compare, pareto_front, run_sampled, sample_errors
@@ -126,8 +130,6 @@ COLUMNS = [("scene", "{}"), ("variant", "{}"), ("level", "{}"), ("particles", "{
 def configs(variants, levels, dts=DT_LADDER, fractions=BOUND_FRACTIONS, explicit_tried=EXPLICIT_TRIED) -> list[Config]:
     """The sweep: every variant at every level (0-based); the step ladder for the integrators without a step
     limit, bound fractions and a few frame-sized steps for the explicit ones. Multigrid needs a coarser level."""
-    from taichi_cloth.integrators import integrator_class
-
     out = []
     for level in levels:
         for v in variants:
@@ -167,8 +169,6 @@ def reference(spec: StudyScene, base: int, finest: int, ref_dt: float, times, ca
     by every input). Backward Euler is first order, so their distance estimates the ref_dt run's own error; where
     it exceeds FLOOR (after the first fold or contact: a drape's fold pattern is not unique) the vertex errors of
     a configuration no longer measure its accuracy, and only the leading samples under it are used."""
-    from multilevel.hierarchy import Hierarchy48
-
     integrator, opts = REFERENCE
     key = hashlib.sha1(json.dumps([asdict(spec), base, finest, ref_dt, list(map(float, times)), opts],
                                   default=str).encode()).hexdigest()[:12]
@@ -500,9 +500,6 @@ def add_arguments(p) -> None:
 
 
 def run(args) -> int:
-    from taichi_cloth import runtime
-    from taichi_cloth.quality import PRESETS_PATH
-
     unknown = [v for v in args.variants if v not in VARIANTS]
     if unknown:
         print(f"error: unknown variant {unknown[0]!r}; choose from {', '.join(VARIANTS)}")

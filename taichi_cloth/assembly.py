@@ -15,17 +15,25 @@ from clothbase.errors import warn
 from collision.self_collision import SelfCollision
 
 from .adaptive import AdaptiveOptions, AdaptiveStep
+from .body.blendshapes import BlendShapes
+from .body.morphing import MorphingBody
 from .clock import FixedStep
 from .colliders import Colliders, build_colliders
 from .contacts import Contacts
 from .diagnostics import Diagnostics
 from .errors import SceneError
 from .forces import ForceModel
+from .garment.garment import GarmentCloth
+from .garment.levels import MultilevelGarment
+from .garment.sewing import Sewing, SewingOptions
 from .integrators import integrator_class
 from .model import Model, State
+from .multilevel_cloth import MultilevelCloth
 from .pins import Pins, PinSpec, pinned_mask
+from .refiner import Refiner, SettleCriterion
 from .rest import RestCriterion, RestMonitor
 from .stability import omega_max_estimate, stable_dt
+from .strain import StrainMap
 from .stretch_limit import StretchLimit
 from .wind import Wind
 
@@ -156,8 +164,6 @@ def assemble(cloth, *, name: str = "cloth", integrator: str = DEFAULT_INTEGRATOR
         clock.model_changed(refiner.dt_scale(refiner.level))
     strain_map = None
     if source.garment is not None:
-        from .strain import StrainMap
-
         strain_map = StrainMap(model)
 
     _check_step(step_guard, stepper, model, forces, clock, source, specs, refiner, parts_warnings)
@@ -200,10 +206,6 @@ class _Source:
 
 
 def _cloth_source(cloth, precision: str, multilevel, sewing) -> _Source:
-    from .garment.garment import GarmentCloth
-    from .garment.levels import MultilevelGarment
-    from .multilevel_cloth import MultilevelCloth
-
     if isinstance(cloth, MultilevelGarment):  # the pieces apart on the start level, then the merged levels
         g = cloth.garment
         local = (multilevel or {}).get("refine") == "local"
@@ -291,8 +293,6 @@ def _attach_levels(stepper, integrator: str, source: _Source, multilevel, specs,
 
 
 def _sewing(model, state, forces, contacts, garment, options: dict | None, levels=None):
-    from .garment.sewing import Sewing, SewingOptions
-
     try:
         return Sewing(model, state, forces, contacts, garment, SewingOptions(**(options or {})), levels)
     except (TypeError, ValueError) as err:
@@ -300,8 +300,6 @@ def _sewing(model, state, forces, contacts, garment, options: dict | None, level
 
 
 def _refiner(model, state, contacts, cloth, options: dict | None, gravity, ready=None, garment=None):
-    from .refiner import Refiner, SettleCriterion
-
     opts = dict(options or {})
     refine, dt_growth, angle = opts.pop("refine", True), opts.pop("dt_growth", 1.0), opts.pop("angle", 20.0)
     try:
@@ -314,9 +312,6 @@ def _refiner(model, state, contacts, cloth, options: dict | None, gravity, ready
 def _body_morph(options: dict, collide, sewing, dt: float):
     """The MorphingBody of `body_morph` (see assemble): it drives the scene's first mesh collider, which must be
     the blend shapes' base body; start "sewn" (the default for a garment) waits for the seams to be joined."""
-    from .body import BlendShapes
-    from .body.morphing import MorphingBody
-
     opts = dict(options)
     bodies = collide.bodies if collide is not None else []
     if not bodies:

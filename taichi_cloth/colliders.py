@@ -19,8 +19,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+
 from clothbase.meshes import load_triangle_mesh, open_mesh_warning
 from collision import MeshCollider, PrimitiveColliders
+from collision.mannequin import load_mannequin
+from collision.primitives import STANDIN_CAPSULES, STANDIN_SPHERES
 from collision.self_collision import SelfCollision
 
 from .contacts import require_bound
@@ -32,11 +36,7 @@ DEFAULT_FRICTION = 0.3
 
 def body_mesh(path: str, scale: float = 1.0, translate=(0.0, 0.0, 0.0), base_dir: Path | None = None):
     """(vertices [m], triangles) of a body: "mannequin" for the shipped CC0 body, else a mesh file."""
-    import numpy as np
-
     if path == "mannequin":
-        from collision.mannequin import load_mannequin
-
         m = load_mannequin()
         return m.vertices * scale + np.asarray(translate, dtype=np.float64), m.triangles
     p = Path(path)
@@ -68,8 +68,6 @@ def build_colliders(specs, base_dir: Path | None = None) -> list:
         elif kind in ("sphere", "capsule", "plane", "standin"):
             g = groups.setdefault((thickness, friction), {"sphere": [], "capsule": [], "plane": []})
             if kind == "standin":
-                from collision.primitives import STANDIN_CAPSULES, STANDIN_SPHERES
-
                 g["sphere"] += STANDIN_SPHERES
                 g["capsule"] += STANDIN_CAPSULES
             elif kind == "sphere":
