@@ -45,15 +45,11 @@ def _record(n: int, settle: float, steps: int):
     scene = Scene(cloth, integrator="implicit", dt=1 / 120, air_damping=0.3, integrator_options={"cg_tolerance": 1e-2},
                   colliders=[{"type": "mesh", "path": "mannequin", "thickness": 0.004, "friction": 0.4}])
     scene.step(int(round(settle / scene.dt)))
-    body = scene.controller("colliders").objects[0]
     frames = []
     for _ in range(steps):
         x0 = scene.positions()
-        body.begin_step()
-        scene.integrator.step(scene.state, scene.contacts, scene.dt)  # alone: its end state is what collision resolves
-        frames.append((x0, scene.positions(), scene.velocities()))
-        scene.contacts.clear()
-        body.resolve(scene.dt)
+        # the integrator's end state, before the collision stage, is what each replayed collider must resolve
+        scene.substep(scene.dt, observe=lambda x0=x0: frames.append((x0, scene.positions(), scene.velocities())))
     return scene, (v, t), frames
 
 
