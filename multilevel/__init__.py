@@ -3,7 +3,6 @@ multigrid solver.
 
   hierarchy   the 4-8 hierarchy of a rectangle (base grid with alternating diagonals, bisection of every
               diamond), parent / diamond / prolongation tables, conformity checks (numpy)
-  outline     the same for an arbitrary pattern outline: a 4-8 interior and a re-triangulated boundary band
   prolong     the Taichi kernel that refills positions and velocities on a refined level, in place
   multigrid   V-cycles over the levels for the approximate implicit system (Jacobi smoother)
   spring_multigrid  V-cycles over nested 4-8 levels for the implicit (Baraff-Witkin) spring system

@@ -23,6 +23,9 @@ import os
 
 import taichi as ti
 from taichi.lang import impl
+from taichi.lang.misc import is_arch_supported
+
+from clothbase.errors import warn
 
 _ARCHS = {"cpu": ti.cpu, "gpu": ti.gpu, "cuda": ti.cuda, "vulkan": ti.vulkan}
 _current_arch: str | None = None
@@ -75,10 +78,6 @@ GPU_ARCHS = ("cuda", "vulkan", "metal")
 
 def gpu_arch():
     """The first GPU backend of GPU_ARCHS this machine supports, or ti.cpu with one warning line when none is."""
-    from taichi.lang.misc import is_arch_supported
-
-    from clothbase.errors import warn
-
     for name in GPU_ARCHS:
         if is_arch_supported(getattr(ti, name)):
             return getattr(ti, name)

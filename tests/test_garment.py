@@ -183,7 +183,7 @@ GARMENTS = Path(__file__).resolve().parents[1] / "demos" / "garments"
 
 @pytest.fixture(scope="module")
 def body():
-    from taichi_cloth.garment.placement import Body
+    from taichi_cloth.body.landmarks import Body
 
     return Body.from_mannequin()
 

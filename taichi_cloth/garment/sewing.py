@@ -82,7 +82,7 @@ class SeamGap:
 class Sewing(Controller):
     """Closes the seams of a scene whose cloth is a GarmentCloth (a controller; one kernel, compiled once).
 
-    model, state, forces: the scene's; garment: the GarmentCloth; options: SewingOptions; levels: for a garment run
+    model, state, forces, contacts: the scene's (contacts None without colliders); garment: the GarmentCloth; options: SewingOptions; levels: for a garment run
     coarse to fine, its MultilevelGarment (taichi_cloth.garment.levels): `garment` is then its start level's, and
     after a level switch `garment` and `current_of` are the new level's (the seam gaps, the recording and the
     quality table follow the level).
@@ -98,8 +98,8 @@ class Sewing(Controller):
     STALL_SHRINK = 0.05
     STALL_TIME = 0.1
 
-    def __init__(self, model, state, forces, garment, options: SewingOptions, levels=None):
-        self.model, self.state, self.forces = model, state, forces
+    def __init__(self, model, state, forces, contacts, garment, options: SewingOptions, levels=None):
+        self.model, self.state, self.forces, self.contacts = model, state, forces, contacts
         self.x = state.x  # the kernel reads this field
         self.garment, self.options, self.levels = garment, options, levels
         if levels is not None and options.join != "merge":
@@ -135,8 +135,8 @@ class Sewing(Controller):
     def _body_friction(self, on: bool) -> None:
         """Friction against the colliders in the implicit step: off while sewing, so that the seams pull the pieces
         over the body into place (with it the T-shirt's seams held 2.4 mm apart against the 2 mm to join)."""
-        if self.state.contacts is not None:
-            self.state.contacts.friction_scale[None] = 1.0 if on else 0.0
+        if self.contacts is not None:
+            self.contacts.friction_scale[None] = 1.0 if on else 0.0
 
     def reset(self) -> ModelChange:
         """Back to the pieces as placed, apart, gravity off while sewing: the model is refilled with the garment
