@@ -18,6 +18,9 @@ from pathlib import Path
 
 import numpy as np
 
+import taichi_cloth as tc
+from benchmarks.integrators import hanging_cloth, time_scene
+
 VARIANTS = [
     ("as published (2 sweeps, from 0)", {}),
     ("jv_term", {"jv_term": True}),
@@ -53,14 +56,10 @@ def hang(tc, integrator, opts, dt=0.01, steps=600):
 
 
 def ms_per_step(tc, opts):
-    from taichi_cloth.bench.integrators import hanging_cloth, time_scene
-
     return time_scene(hanging_cloth(128, "approx-implicit", **opts), 10)["ms_per_step"]
 
 
 def main():
-    import taichi_cloth as tc
-
     p = argparse.ArgumentParser(description=__doc__.strip().splitlines()[0])
     p.add_argument("--out", default="out/bench")
     p.add_argument("--arch", default="cpu", choices=("cpu", "gpu"))

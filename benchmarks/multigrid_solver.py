@@ -42,6 +42,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import taichi as ti  # noqa: E402
 
+import taichi_cloth as tc  # noqa: E402
+from multilevel.hierarchy import Hierarchy48  # noqa: E402
+from multilevel.multigrid import MultigridSolver, edge_operator, prolongation_matrix  # noqa: E402
+
 G = 9.81
 H = 1.0 / 120.0
 THRESHOLDS = (1e-3, 1e-6)
@@ -54,9 +58,6 @@ PIN_LABELS = {"none": "unpinned", "top": "top edge pinned", "corners": "two top 
 def build(pins: str):
     """The hierarchy and one operator per level; pins: "none", "top" (the edge y = +0.5 m) or "corners"
     (its two ends: point pins, the hanging-cloth scene)."""
-    from multilevel.hierarchy import Hierarchy48
-    from multilevel.multigrid import edge_operator
-
     hier = Hierarchy48.rectangle((1.0, 1.0), (16, 16), 7)
     ops = []
     for lv in hier.levels:
@@ -247,8 +248,6 @@ def numpy_vcycle_factor(hier, ops, h, mode="rediscretised", omega=0.9, nu=2, cyc
     import scipy.sparse as sp
     from scipy.sparse.linalg import splu
 
-    from multilevel.multigrid import prolongation_matrix
-
     nl = len(ops)
     free = [~op.pinned if (mode != "galerkin" or lv == nl - 1) else np.ones(op.n, bool) for lv, op in enumerate(ops)]
     Ps = [None] + [prolongation_matrix(hier[l], ops[l - 1].n) for l in range(1, nl)]
@@ -289,8 +288,6 @@ def numpy_vcycle_factor(hier, ops, h, mode="rediscretised", omega=0.9, nu=2, cyc
 def galerkin_difference(hier, ops, h):
     """||A_c - P^T A_f P||_F / ||A_c||_F per coarse level (unpinned, one level apart), and the Rayleigh quotient
     ratio of the two on the smooth vector u = sin(pi x) sin(pi y) (1 = same energy)."""
-    from multilevel.multigrid import prolongation_matrix
-
     out = []
     for l in range(len(ops) - 1):
         P = prolongation_matrix(hier[l + 1], ops[l].n)
@@ -311,10 +308,6 @@ def first_below(res, thr):
 
 
 def main():
-    import taichi_cloth as tc
-
-    from multilevel.multigrid import MultigridSolver
-
     p = argparse.ArgumentParser(description=__doc__.strip().splitlines()[0])
     p.add_argument("--out", default="out/bench")
     p.add_argument("--arch", default="cpu", choices=("cpu", "gpu"))

@@ -40,6 +40,11 @@ from pathlib import Path
 
 import numpy as np
 
+import taichi_cloth as tc
+from collision.distance import unsigned_distance
+from taichi_cloth.garment.metrics import garment_quality
+from taichi_cloth.scenefile import load_scene
+
 ROOT = Path(__file__).resolve().parents[1]
 SCENE = ROOT / "demos" / "scenes" / "sew_tshirt_multilevel.toml"
 
@@ -61,9 +66,6 @@ def run_to_rest(start_level: int, frames: int, noise: float = 0.0, dt_growth: fl
                 levels: int = 3, preconditioner: str = "auto"):
     """(figures dict, rest positions (P,3), triangles (T,3)) of the T-shirt run from start_level (1-based) of
     `levels`, refined `refine` ("global" or "local"), CG preconditioned by `preconditioner`."""
-    from taichi_cloth.garment.metrics import garment_quality
-    from taichi_cloth.scenefile import load_scene
-
     cfg = tomllib.loads(SCENE.read_text())
     cfg["multilevel"]["levels"] = levels
     cfg["multilevel"]["start_level"] = start_level
@@ -93,8 +95,6 @@ def run_to_rest(start_level: int, frames: int, noise: float = 0.0, dt_growth: fl
 def surface_distance(xa, ta, xb, tb) -> float:
     """RMS symmetric surface distance [m]: every vertex of A to B's surface and every vertex of B to A's (exact up
     to 0.2 m, clipped beyond)."""
-    from collision.distance import unsigned_distance
-
     d = np.concatenate([unsigned_distance(xa, xb[tb], 0.2), unsigned_distance(xb, xa[ta], 0.2)])
     return float(np.sqrt(np.mean(d ** 2)))
 
@@ -113,7 +113,6 @@ def main(argv=None) -> int:
     ap.add_argument("--modes", nargs="+", choices=list(RUNS), default=DEFAULT_MODES,
                     help="the runs (finest and coarse-to-fine always: the others are compared with them)")
     args = ap.parse_args(argv)
-    import taichi_cloth as tc
 
     tc.init(args.arch)
     always = ["finest", "coarse-to-fine"]

@@ -2,7 +2,6 @@
 
   hierarchy   the 4-8 hierarchy of a rectangle (base grid with alternating diagonals, bisection of every
               diamond), parent / diamond / prolongation tables, conformity checks (numpy)
-  outline     the same for an arbitrary pattern outline: a 4-8 interior and a re-triangulated boundary band
   prolong     the Taichi kernel that refills positions and velocities on a refined level, in place
 (The implicit step's V-cycles over these levels are taichi_cloth.linear's.)
 

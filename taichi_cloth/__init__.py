@@ -1,7 +1,7 @@
 """taichi-cloth: mass-spring cloth on Taichi kernels.
 
-Life cycle: ClothBuilder -> ClothData -> Model (fields) -> State -> Integrator.step(dt), composed by a
-Scene (the only time loop, with the controllers a scene names), recorded by a Recorder. Units are SI throughout
+Life cycle: ClothBuilder -> ClothData -> Model (fields) -> State -> Integrator.step(state, contacts, dt) after the
+collision stage (Colliders), composed by a Scene (the only time loop, with the controllers a scene names), recorded by a Recorder. Units are SI throughout
 (m, kg, s, N).
 
     import taichi_cloth as tc
@@ -24,25 +24,18 @@ from .model import Model, State
 from .pins import PinSpec
 from .runtime import CompileCounter, init
 from .scene import Scene
+from .scenefile import load_scene
 from .summary import RunSummary
 
 __version__ = "0.1.0"
 
 
 def __getattr__(name: str):
-    # the recorder imports rerun, which takes a while: only when something records (PEP 562)
     if name == "Recorder":
-        from .recorder import Recorder
+        from .recorder import Recorder  # rerun (0.6 s to import): only when something records (PEP 562)
 
         return Recorder
     raise AttributeError(f"module 'taichi_cloth' has no attribute {name!r}")
-
-
-def load_scene(source, **overrides):
-    """Parse a scene file (path) or dict into a LoadedScene (.scene, .frames, .output ...); see scenefile."""
-    from .scenefile import load_scene as _load
-
-    return _load(source, **overrides)
 
 
 __all__ = ["BlowUpError", "ClothBuilder", "ClothData", "CompileCounter", "INTEGRATORS", "MATERIALS", "Material",

@@ -15,17 +15,26 @@ from clothbase.errors import warn
 from collision.self_collision import SelfCollision
 
 from .adaptive import AdaptiveOptions, AdaptiveStep
+from .body.blendshapes import BlendShapes
+from .body.morphing import MorphingBody
 from .clock import FixedStep
 from .colliders import Colliders, build_colliders
 from .contacts import Contacts
+from .diagnostics import Diagnostics
 from .errors import SceneError
 from .forces import ForceModel
+from .garment.garment import GarmentCloth
+from .garment.levels import MultilevelGarment
+from .garment.sewing import Sewing, SewingOptions
 from .integrators import integrator_class
 from .linear import NestedLevels
 from .model import Model, State
+from .multilevel_cloth import MultilevelCloth
 from .pins import Pins, PinSpec, pinned_mask
-from .rest import RestCriterion
+from .refiner import Refiner, SettleCriterion
+from .rest import RestCriterion, RestMonitor
 from .stability import omega_max_estimate, stable_dt
+from .strain import StrainMap
 from .stretch_limit import StretchLimit
 from .wind import Wind
 
@@ -36,7 +45,8 @@ DEFAULT_INTEGRATOR = "implicit"
 @dataclass
 class SceneParts:
     """What a Scene is made of. controllers run in this order: the refiner, the body morph, pins, sewing, the
-    stretch limit, the colliders, the strain map."""
+    stretch limit, the colliders, the strain map; the colliders' per-step work is the collision stage, which runs
+    after every other controller's step hooks."""
 
     name: str
     model: Model
@@ -45,11 +55,14 @@ class SceneParts:
     integrator: object
     clock: object
     controllers: list = field(default_factory=list)
+    contacts: Contacts | None = None  # the contact normals the collision stage writes and the integrator filters
+    collision: Colliders | None = None  # the collision stage (also among the controllers: what it shows and counts)
     normals: object = None
     warnings: list = field(default_factory=list)
     max_speed: float = 200.0
     max_strain: float = 10.0
-    rest: RestCriterion = field(default_factory=RestCriterion)
+    rest: RestMonitor | None = None  # when the cloth counts as at rest
+    diagnostics: Diagnostics | None = None  # the per-frame measurement
     stop_at_rest: bool = False
 
 
@@ -117,13 +130,13 @@ def assemble(cloth, *, name: str = "cloth", integrator: str = DEFAULT_INTEGRATOR
         # the mesh in use first: its edges give the starting thickness and its particles the seam flags
         shapes = [(d.positions, d.triangles) for d in [model.data] + [d for d in source.levels if d is not model.data]]
         objects.append(SelfCollision(model.triangles, model.n_triangles, shapes, seam_particles=seams, **options))
-    collide = None
+    collide = contacts = None
     if objects:
-        state.contacts = Contacts(model)
-        collide = Colliders(model, state, objects, state.contacts)
+        contacts = Contacts(model)
+        collide = Colliders(model, state, objects, contacts)
     sources = ([wind_source] if wind_source is not None else []) + (collide.repulsions if collide else [])
     forces = ForceModel(model, state, gravity, air_damping, sources)
-    stepper = integrator_class(integrator)(model, state, forces, **(integrator_options or {}))
+    stepper = integrator_class(integrator)(model, state, forces, contacts=contacts, **(integrator_options or {}))
     if getattr(stepper, "needs_levels", False):
         _attach_levels(stepper, source, multilevel, parts_warnings)
 
@@ -141,26 +154,28 @@ def assemble(cloth, *, name: str = "cloth", integrator: str = DEFAULT_INTEGRATOR
     else:
         clock = FixedStep(dt, fps)
 
-    limit = StretchLimit(model, state, **stretch_limit) if stretch_limit else None
-    sew = _sewing(model, state, forces, source.garment, sewing, source.garment_levels) \
+    limit = StretchLimit(model, state, contacts, **stretch_limit) if stretch_limit else None
+    sew = _sewing(model, state, forces, contacts, source.garment, sewing, source.garment_levels) \
         if source.garment is not None else None
     morph = _body_morph(body_morph, collide, sew, clock.dt) if body_morph is not None else None
     refiner = None
     if source.multilevel is not None:
         ready = (lambda: sew.joined) if sew is not None else None  # a garment refines once its seams are joined
-        refiner = _refiner(model, state, source.multilevel, multilevel, gravity, ready, source.garment_levels)
+        refiner = _refiner(model, state, contacts, source.multilevel, multilevel, gravity, ready, source.garment_levels)
         clock.model_changed(refiner.dt_scale(refiner.level))
     strain_map = None
     if source.garment is not None:
-        from .strain import StrainMap
-
         strain_map = StrainMap(model)
 
     _check_step(step_guard, stepper, model, forces, clock, source, specs, refiner, parts_warnings)
     controllers = [c for c in (refiner, morph, pin_control, sew, limit, collide, strain_map) if c is not None]
-    return SceneParts(name, model, state, forces, stepper, clock, controllers,
+    d = model.data
+    weight = float(d.mass.sum()) * max(float(np.linalg.norm(forces.gravity_value)), 9.81)
+    monitor = RestMonitor(rest_criterion, weight * float(np.linalg.norm(np.ptp(d.positions, axis=0))))
+    diagnostics = Diagnostics(model, state, forces, rest_criterion.p99_speed, stepper.staggered_velocity)
+    return SceneParts(name, model, state, forces, stepper, clock, controllers, contacts, collide,
                       wind_source.normals if wind_source is not None else None, parts_warnings,
-                      float(max_speed), float(max_strain), rest_criterion, stop_at_rest)
+                      float(max_speed), float(max_strain), monitor, diagnostics, stop_at_rest)
 
 
 def _rest(options: dict | None) -> tuple[RestCriterion, bool]:
@@ -192,10 +207,6 @@ class _Source:
 
 
 def _cloth_source(cloth, precision: str, multilevel, sewing) -> _Source:
-    from .garment.garment import GarmentCloth
-    from .garment.levels import MultilevelGarment
-    from .multilevel_cloth import MultilevelCloth
-
     if isinstance(cloth, MultilevelGarment):  # the pieces apart on the start level, then the merged levels
         g = cloth.garment
         local = (multilevel or {}).get("refine") == "local"
@@ -255,22 +266,18 @@ def _attach_levels(stepper, source: _Source, multilevel, notes: list) -> None:
         notes.append(note)
 
 
-def _sewing(model, state, forces, garment, options: dict | None, levels=None):
-    from .garment.sewing import Sewing, SewingOptions
-
+def _sewing(model, state, forces, contacts, garment, options: dict | None, levels=None):
     try:
-        return Sewing(model, state, forces, garment, SewingOptions(**(options or {})), levels)
+        return Sewing(model, state, forces, contacts, garment, SewingOptions(**(options or {})), levels)
     except (TypeError, ValueError) as err:
         raise SceneError(f"sewing: {err}") from None
 
 
-def _refiner(model, state, cloth, options: dict | None, gravity, ready=None, garment=None):
-    from .refiner import Refiner, SettleCriterion
-
+def _refiner(model, state, contacts, cloth, options: dict | None, gravity, ready=None, garment=None):
     opts = dict(options or {})
     refine, dt_growth, angle = opts.pop("refine", True), opts.pop("dt_growth", 1.0), opts.pop("angle", 20.0)
     try:
-        return Refiner(model, state, state.contacts, cloth, SettleCriterion(**opts), refine, dt_growth, angle, gravity,
+        return Refiner(model, state, contacts, cloth, SettleCriterion(**opts), refine, dt_growth, angle, gravity,
                        ready, garment)
     except (TypeError, ValueError) as err:
         raise SceneError(f"multilevel: {err}") from None
@@ -279,9 +286,6 @@ def _refiner(model, state, cloth, options: dict | None, gravity, ready=None, gar
 def _body_morph(options: dict, collide, sewing, dt: float):
     """The MorphingBody of `body_morph` (see assemble): it drives the scene's first mesh collider, which must be
     the blend shapes' base body; start "sewn" (the default for a garment) waits for the seams to be joined."""
-    from .body import BlendShapes
-    from .body.morphing import MorphingBody
-
     opts = dict(options)
     bodies = collide.bodies if collide is not None else []
     if not bodies:

@@ -6,10 +6,22 @@ import importlib
 import os
 import shutil
 import sys
+from importlib.metadata import version as package_version
 from pathlib import Path
 
+import numpy
+import taichi
+
+from clothbase.meshes import load_triangle_mesh
+
+from . import runtime
+from .body import cli as body_cli
 from .errors import BlowUpError, MeshError, PatternError, SceneError
+from .flatten import flatten_pieces, format_table, plot_flat, write_flat_dxf
+from .garment.pattern import unit_scale
 from .guards import MAX_STEPS, check_run_length
+from .integrators import INTEGRATORS
+from .material import MATERIALS
 from .paths import free_stem
 from .quality import QUALITIES
 
@@ -138,12 +150,6 @@ def _cmd_run(args) -> int:
 
 def _cmd_flatten(args) -> int:
     """`flatten piece.obj [...] --out pieces.dxf`: flatten 3D pieces, print the error table, write DXF + PNG."""
-    from clothbase.meshes import load_triangle_mesh
-
-    from . import runtime
-    from .flatten import flatten_pieces, format_table, plot_flat, write_flat_dxf
-    from .garment.pattern import unit_scale
-
     out = Path(args.out or Path("out") / (Path(args.meshes[0]).stem + ".dxf"))
     if out.suffix.lower() != ".dxf":
         print(f"error: --out must name a .dxf file, got {out}", file=sys.stderr)
@@ -163,15 +169,8 @@ def _cmd_flatten(args) -> int:
 
 
 def _cmd_info(args) -> int:
-    import numpy
-    import rerun
-    import taichi
-
-    from .integrators import INTEGRATORS
-    from .material import MATERIALS
-
     version = ".".join(map(str, taichi.__version__)) if isinstance(taichi.__version__, tuple) else taichi.__version__
-    print(f"taichi {version}, numpy {numpy.__version__}, rerun-sdk {rerun.__version__}")
+    print(f"taichi {version}, numpy {numpy.__version__}, rerun-sdk {package_version('rerun-sdk')}")
     print("integrators:")
     for name, cls in INTEGRATORS.items():
         kind = "no step limit" if cls.unconditionally_stable else "explicit, step limited (docs/algorithms.md, step limits)"
@@ -185,8 +184,10 @@ def _cmd_info(args) -> int:
     return 0
 
 
-#: `bench SUITE`: modules of taichi_cloth.bench, each with add_arguments(parser) and run(args) -> exit code
-SUITES = ("integrators", "collision", "tradeoff", "stability", "peers")
+#: `bench SUITE`: modules of the top-level benchmarks package, each with add_arguments(parser) and run(args) -> exit
+#: code (benchmarks imports the engine, never the other way: the suites are found by name)
+SUITES = {"integrators": "integrators", "collision": "collision_cost", "tradeoff": "tradeoff", "stability": "stability",
+          "peers": "peers"}  # suite -> module (collision_cost: a script in benchmarks/ must not shadow `collision`)
 
 
 def main(argv=None) -> int:
@@ -196,8 +197,6 @@ def main(argv=None) -> int:
     p_run.add_argument("scene", help="scene file (.toml)")
     add_run_arguments(p_run)
     p_run.set_defaults(func=_cmd_run)
-    from .body import cli as body_cli
-
     body_cli.add_parser(sub)
     p_flat = sub.add_parser("flatten", help="flatten 3D pieces (disc meshes) to 2D: error table, DXF and PNG")
     p_flat.add_argument("meshes", nargs="+", help="3D piece meshes (OBJ, PLY, STL...), one disc each")
@@ -208,17 +207,18 @@ def main(argv=None) -> int:
     p_flat.set_defaults(func=_cmd_flatten)
     p_info = sub.add_parser("info", help="versions, integrators and their options, materials")
     p_info.set_defaults(func=_cmd_info)
-    p_bench = sub.add_parser("bench", help="benchmarks: `bench [integrators]`, `bench " + "`, `bench ".join(SUITES[1:]) + "`")
-    suites = p_bench.add_subparsers(dest="suite", required=True)
-    for name in SUITES:
-        module = importlib.import_module(f".bench.{name}", __package__)
-        p_suite = suites.add_parser(name, help=module.__doc__.strip().splitlines()[0],
-                                    description=module.__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-        module.add_arguments(p_suite)
-        p_suite.set_defaults(func=module.run)
+    p_bench = sub.add_parser("bench", help="benchmarks: `bench [integrators]`, `bench " + "`, `bench ".join(list(SUITES)[1:]) + "`")
     argv = list(sys.argv[1:] if argv is None else argv)
-    if argv and argv[0] == "bench" and (len(argv) == 1 or argv[1] not in SUITES + ("-h", "--help")):
-        argv.insert(1, "integrators")  # `bench` alone is the integrator benchmark
+    if argv[:1] == ["bench"]:  # a suite imports what it measures: only a bench command loads them
+        suites = p_bench.add_subparsers(dest="suite", required=True)
+        for name, module_name in SUITES.items():
+            module = importlib.import_module(f"benchmarks.{module_name}")
+            p_suite = suites.add_parser(name, help=module.__doc__.strip().splitlines()[0], description=module.__doc__,
+                                        formatter_class=argparse.RawDescriptionHelpFormatter)
+            module.add_arguments(p_suite)
+            p_suite.set_defaults(func=module.run)
+        if len(argv) == 1 or argv[1] not in (*SUITES, "-h", "--help"):
+            argv.insert(1, "integrators")  # `bench` alone is the integrator benchmark
     args = parser.parse_args(argv)
     try:
         return args.func(args)

@@ -11,17 +11,23 @@ Spec keys (SI units):
   {"type": "standin"}: Zhang et al. 2017's sphere-collider body, a sphere-and-capsule stand-in for the mannequin
   every type also takes "thickness" [m] (default 0.003) and "friction" (default 0.3).
 Analytic shapes with the same thickness and friction share one PrimitiveColliders (one kernel).
-`Colliders` is the scene's controller: every collider remembers where the particles start a step, and after the
-step (and the other controllers) pushes them out, writing the contact normals the implicit integrators filter.
+`Colliders` is the scene's collision stage (and a controller for what it shows, counts and refills): `begin`
+remembers where the particles start a step; `collide`, after the step and the controllers' after_step, pushes them
+out and writes the contact normals the next step's integrator filters (Scene.substep).
 """
 from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+
 from clothbase.meshes import load_triangle_mesh, open_mesh_warning
 from collision import MeshCollider, PrimitiveColliders
+from collision.mannequin import load_mannequin
+from collision.primitives import STANDIN_CAPSULES, STANDIN_SPHERES
 from collision.self_collision import SelfCollision
 
+from .contacts import require_bound
 from .control import Controller
 
 DEFAULT_THICKNESS = 0.003  # m
@@ -30,11 +36,7 @@ DEFAULT_FRICTION = 0.3
 
 def body_mesh(path: str, scale: float = 1.0, translate=(0.0, 0.0, 0.0), base_dir: Path | None = None):
     """(vertices [m], triangles) of a body: "mannequin" for the shipped CC0 body, else a mesh file."""
-    import numpy as np
-
     if path == "mannequin":
-        from collision.mannequin import load_mannequin
-
         m = load_mannequin()
         return m.vertices * scale + np.asarray(translate, dtype=np.float64), m.triangles
     p = Path(path)
@@ -66,8 +68,6 @@ def build_colliders(specs, base_dir: Path | None = None) -> list:
         elif kind in ("sphere", "capsule", "plane", "standin"):
             g = groups.setdefault((thickness, friction), {"sphere": [], "capsule": [], "plane": []})
             if kind == "standin":
-                from collision.primitives import STANDIN_CAPSULES, STANDIN_SPHERES
-
                 g["sphere"] += STANDIN_SPHERES
                 g["capsule"] += STANDIN_CAPSULES
             elif kind == "sphere":
@@ -84,9 +84,9 @@ def build_colliders(specs, base_dir: Path | None = None) -> list:
 
 
 class Colliders(Controller):
-    """The scene's colliders, resolved after every step in order (self-collision last: it never pushes a particle
-    that a body holds into that body, so a body does not undo it). objects: collision objects (MeshCollider,
-    PrimitiveColliders, SelfCollision); contacts: the scene's Contacts, whose normals they write.
+    """The scene's collision stage: its colliders, resolved after every step in order (self-collision last: it never
+    pushes a particle that a body holds into that body, so a body does not undo it). objects: collision objects
+    (MeshCollider, PrimitiveColliders, SelfCollision); contacts: the scene's Contacts, whose normals they write.
 
     moving: indices of the objects whose surface moves during a run (a morphing body): the recorder logs them on
     the timeline instead of once
@@ -95,7 +95,7 @@ class Colliders(Controller):
     name = "colliders"
 
     def __init__(self, model, state, objects: list, contacts):
-        self.objects, self.contacts = list(objects), contacts
+        self.objects, self.state, self.contacts = list(objects), state, contacts
         self.moving: set[int] = set()
         for c in self.objects:
             c.attach(state.x, state.v, model.inv_mass, model.n_particles, contacts.normal, model.serial,
@@ -135,12 +135,18 @@ class Colliders(Controller):
         when a body mesh or self-collision is among the colliders."""
         return tuple(self.objects) if all(isinstance(c, PrimitiveColliders) for c in self.objects) else None
 
-    def before_step(self, t: float, dt: float) -> None:
+    def begin(self, state, contacts) -> None:
+        """A step of `state` begins: every collider remembers where the particles start (its crossing tests run
+        from there). state and contacts: those the colliders were built for (another raises ValueError)."""
+        require_bound(self, state, contacts)
         for c in self.objects:
             c.begin_step()
 
-    def after_step(self, t: float, dt: float) -> None:
-        self.contacts.clear()
+    def collide(self, state, contacts, dt: float) -> None:
+        """After a step of dt [s]: push the particles of `state` out of every collider and write `contacts` afresh
+        (the next step's integrator filters them)."""
+        require_bound(self, state, contacts)
+        contacts.clear()
         for c in self.objects:
             c.resolve(dt)
 

@@ -56,3 +56,13 @@ class Contacts:
         """vec without its component along particle i's contact normal (vec itself when i is not in contact, 0
         when it is stuck)."""
         return self.projector(i) @ vec
+
+
+def require_bound(owner, state, contacts) -> None:
+    """Refuse a State or Contacts other than those `owner` (an integrator, the colliders) was built for: a Taichi
+    kernel of a @ti.data_oriented object binds the fields it reads when it compiles, so it cannot step another."""
+    if state is not owner.state or contacts is not owner.contacts:
+        which = "state" if state is not owner.state else "contacts"
+        raise ValueError(f"{type(owner).__name__} was built for another {which}: its kernels read the fields they "
+                         "were compiled for; build the scene's parts for this state (taichi_cloth.assembly.assemble), "
+                         "or copy it into the bound one (State.set)")

@@ -1,10 +1,11 @@
 """The controllers' protocol: what a feature of a scene may do around the integrator's steps.
 
 A Scene holds a model, a state, an integrator, a step clock and a list of controllers (pins, sewing, the level
-refiner, the body morph, the stretch limit, the colliders...). Its loop calls, in list order:
+refiner, the body morph, the stretch limit, the colliders...). The colliders' per-step work is no hook: it is the
+scene's collision stage (taichi_cloth.colliders), around the integrator's step. Its loop calls, in list order:
 
     before_step(t, dt)       before every integrator step (t: the time the step starts at)
-    after_step(t, dt)        after every integrator step (t: the time it ended at)
+    after_step(t, dt)        after every integrator step (t: the time it ended at), before the collision stage
     after_frame(frame)       after every frame's measurement; returns a ModelChange, or None
     reset()                  when the scene goes back to t = 0; returns a ModelChange, or None
 

@@ -30,7 +30,11 @@ import numpy as np
 
 from clothbase.meshes import connected_components, edges_of, triangle_areas, validate_triangle_mesh
 
+from .cloth import ClothData, SpringKind, mesh_cloth
 from .errors import MeshError
+from .garment.pattern import PatternPiece, Segment
+from .model import Model
+from .scene import Scene
 
 __all__ = ["FlatPiece", "disc_boundary", "unfold", "flatten", "flatten_pieces", "write_flat_dxf", "plot_flat",
            "format_table"]
@@ -218,8 +222,6 @@ class FlatPiece:
     def pattern_piece(self):
         """The flattened outline as a PatternPiece (metres): polylines between the named corners, or one closed
         polyline when there are none."""
-        from .garment.pattern import PatternPiece, Segment
-
         pts = self.uv[self.boundary]
         if self.boundary_2d and signed_polygon_area(pts) < 0:
             raise MeshError(f"{self.name}: the flattened outline runs clockwise")
@@ -301,8 +303,6 @@ def flatten_pieces(pieces, tolerance: float = 1e-6, max_iterations: int = 500, m
 
 def _prepare(name, vertices, triangles, corners, material):
     """Checks, the unfolded layout and the planar spring system (ClothData at z = 0) of one piece."""
-    from .cloth import ClothData, SpringKind, mesh_cloth
-
     v = np.asarray(vertices, dtype=np.float64)
     t = np.asarray(triangles, dtype=np.int64)
     boundary = disc_boundary(v, t, name)
@@ -323,9 +323,6 @@ class _Relaxation:
     """The planar spring relaxation (module docstring, step 2): one Scene whose fields fit every piece."""
 
     def __init__(self, datas):
-        from .model import Model
-        from .scene import Scene
-
         capacity = tuple(max(n) for n in zip(*((d.n_particles, d.n_springs, len(d.triangles)) for d in datas)))
         model = Model(datas[0], "f64", capacity)
         self.scene = Scene(model, integrator="implicit", dt=1.0, gravity=(0.0, 0.0, 0.0), air_damping=0.0,
@@ -356,7 +353,7 @@ class _Relaxation:
 
 def write_flat_dxf(pieces, path, units: str = "mm") -> Path:
     """Write flattened pieces (FlatPiece) to a DXF (one layer per piece, see garment.dxf.write_dxf)."""
-    from .garment.dxf import write_dxf
+    from .garment.dxf import write_dxf  # ezdxf (0.5 s to import): only when a DXF is written
 
     return write_dxf([p.pattern_piece() for p in pieces], path, units)
 
@@ -367,7 +364,7 @@ def plot_flat(pieces, path, full_scale: float | None = None, references=None, la
     references: optional list (one per piece, or None) of 2D outlines (m, 2) [m] drawn dashed behind (e.g. the
     original pattern). layouts: optional (V,2) arrays drawn instead of each piece's uv (e.g. aligned to the pattern).
     full_scale: colour range in per cent (default: the largest |error|)."""
-    import matplotlib
+    import matplotlib  # 0.5 s with pyplot: only when a picture is drawn
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt

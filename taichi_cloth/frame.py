@@ -8,6 +8,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+#: the scalar series every recording has (path -> series names), before the controllers add theirs
+SERIES = {"energy": ["kinetic", "potential", "total"], "strain/max": "max strain", "speed/max": "max speed [m/s]",
+          "perf/steps_per_s": "steps/s"}
+
 
 @dataclass
 class SceneLayout:
@@ -69,3 +73,29 @@ class FrameSnapshot:
     meshes: dict = field(default_factory=dict)
     scalars: dict = field(default_factory=dict)
     events: list = field(default_factory=list)
+
+
+def scene_layout(scene) -> SceneLayout:
+    """What a recording shows for the whole run of `scene` (a Scene): the series, the colliders, whether the
+    topology changes."""
+    layout = SceneLayout(scene.name, any(c.changes_topology for c in scene.controllers), dict(SERIES))
+    for c in scene.controllers:
+        c.layout(layout)
+    return layout
+
+
+def scene_snapshot(scene, frame: int, m, steps_per_s: float | None = None, events=()) -> FrameSnapshot:
+    """A read-only copy of `scene`'s frame for a recorder: positions, normals, the topology and its version, the
+    scalars of the measurement `m` (a Measurement), what every controller shows, and `events` ((level, text)
+    pairs)."""
+    tri = scene.model.data.triangles
+    x, normals = scene.surface() if len(tri) else (scene.positions().astype(np.float32), None)
+    snap = FrameSnapshot(frame, scene.state.t, x, normals, tri, scene.topology_version, events=list(events))
+    snap.scalars["energy"] = [m.kinetic, m.potential, m.total]
+    snap.scalars["strain/max"] = m.max_strain
+    snap.scalars["speed/max"] = m.max_speed
+    if steps_per_s is not None:
+        snap.scalars["perf/steps_per_s"] = steps_per_s
+    for c in scene.controllers:
+        c.record(snap)
+    return snap

@@ -205,7 +205,6 @@ class State:
     x: (P,) vec3 fp [m]    positions
     v: (P,) vec3 fp [m/s]  velocities
     t: float [s]           simulated time (host side)
-    contacts: None, or the Contacts (normals of the last step's contacts) the scene's colliders fill
     """
 
     def __init__(self, model: Model):
@@ -215,7 +214,6 @@ class State:
         self.v = blk.vector(3, model.fp, model.capacity[0])
         blk.finalize(self)
         self.t = 0.0
-        self.contacts = None  # a Contacts object when the scene has colliders
         self.reset()
 
     def reset(self) -> None:

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from clothbase.meshes import rows_in
-from multilevel.hierarchy import signed_areas
+from multilevel.hierarchy import Hierarchy48, signed_areas
 
 from .cloth import ClothData, SpringKind, in_plane, mesh_cloth
 from .material import Material
@@ -86,6 +86,4 @@ def multilevel_grid(size=(1.0, 1.0), base_cells=(4, 4), levels: int = 5, materia
                     center=(0.0, 0.0, 0.0), plane: str = "xy", start_level: int = 0) -> MultilevelCloth:
     """A W x H [m] rectangle as a 4-8 hierarchy: base grid of (nx, ny) cells with alternating diagonals,
     refined levels-1 times by bisection. Level L (0-based) has spacing (W/nx) / 2^(L/2)."""
-    from multilevel.hierarchy import Hierarchy48
-
     return multilevel_cloth(Hierarchy48.rectangle(size, base_cells, levels), material, center, plane, start_level)

@@ -12,6 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .garment.seams import route
+
 #: [m] space between two pieces laid side by side
 GAP = 0.12
 
@@ -49,8 +51,6 @@ class PatternView:
 def pattern_view(spec, gap: float = GAP, tolerance: float = 1e-3) -> PatternView:
     """The PatternView of a GarmentSpec (taichi_cloth.garment.garment): pieces shifted to lie side by side along
     x, `gap` [m] apart, bottoms on y = 0; outlines sampled within `tolerance` [m]."""
-    from .garment.seams import route
-
     shift, x0, view = {}, 0.0, PatternView(spec.name)
     for piece in spec.pieces:
         outline = piece.outline(tolerance)
@@ -73,7 +73,7 @@ def pattern_view(spec, gap: float = GAP, tolerance: float = 1e-3) -> PatternView
 
 def seam_color(number: int) -> tuple:
     """RGB in 0..1 of seam `number` (matplotlib's tab10 cycle), the same in the PNG and the recording."""
-    from matplotlib import colormaps
+    from matplotlib import colormaps  # matplotlib (0.2 s to import): only for a garment's pattern view
 
     return tuple(colormaps["tab10"]((number - 1) % 10)[:3])
 
@@ -91,7 +91,7 @@ def plot_pattern(view: PatternView, path, title: str | None = None) -> Path:
     """Write the seam set-up view to a PNG at `path` (cm axes): pieces filled light, corners as dots with their
     names, each seam side in its seam's colour with an arrow along the pick direction and the seam's number;
     the seams are listed by number below. Returns the path."""
-    import matplotlib
+    import matplotlib  # 0.5 s with pyplot: only when a picture is drawn
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt

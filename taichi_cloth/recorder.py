@@ -5,8 +5,8 @@ A recorder is given plain data, never a scene: a SceneLayout once per cloth and 
 (taichi_cloth.frame). The mesh topology is logged once as static data, or on the timeline whenever the snapshot's
 topology version changes (a level switch, merged seams); each frame logs only the vertex positions, normals and
 colours (Rerun's partial-update pattern), the scalars and the events. The per-frame mesh data and scalars are kept
-in memory and sent as columns every BATCH_FRAMES frames (one Rerun call for many frames: a frame logged by itself
-cost 0.2-0.75 ms on the demos, 0.13-0.64 ms batched); flush() and close() send what is kept, so a run that fails
+in memory and sent as columns every BATCH_FRAMES frames (one Rerun call for many frames costs less than a call a
+frame: docs/performance.md); flush() and close() send what is kept, so a run that fails
 midway loses nothing. Timelines: "frame" (sequence) and "sim_time" (duration, s). Scalars live under
 metrics/<entity>/...: energy (kinetic, potential, total [J]), strain/max, speed/max [m/s], level, seam_gap [mm],
 perf/steps_per_s.

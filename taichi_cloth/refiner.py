@@ -20,6 +20,9 @@ from typing import Callable
 
 import numpy as np
 
+from multilevel.hierarchy import refine_local
+from multilevel.prolong import Prolongation
+
 from .control import Controller, FrameInfo, ModelChange
 
 
@@ -79,8 +82,6 @@ class Refiner(Controller):
     def __init__(self, model, state, contacts, cloth, settle: SettleCriterion | None = None,
                  refine: bool | str = True, dt_growth: float = 1.0, angle: float = 20.0, gravity=(0.0, -9.81, 0.0),
                  ready: Callable[[], bool] | None = None, garment=None):
-        from multilevel.prolong import Prolongation
-
         self.model, self.state, self.contacts, self.cloth = model, state, contacts, cloth
         self.ready = ready
         self.settle = settle or SettleCriterion()
@@ -90,7 +91,7 @@ class Refiner(Controller):
         self.mode = mode
         self.local = None
         if mode == "local" and garment is not None:
-            from .garment.local import LocalGarmentRefinement
+            from .garment.local import LocalGarmentRefinement  # scipy.spatial (0.6 s): a garment refined locally
 
             self.local = LocalGarmentRefinement(garment)
         elif mode == "local" and getattr(cloth.hierarchy.levels[0], "regular", None) is not None:
@@ -194,8 +195,6 @@ class Refiner(Controller):
             self.local.accept(local)
             data, garment = local.level.merged, local.level
         elif self.mode == "local":
-            from multilevel.hierarchy import refine_local
-
             mesh, depth = refine_local(self.mesh.uv, self.mesh.triangles, self.marked(), self.depth,
                                        self.cloth.n_levels - 1)
             if mesh.n_vertices == n_old:
@@ -240,7 +239,7 @@ class Refiner(Controller):
         refined locally: the dihedral angle across any edge (its triangles have no hypotenuse)."""
         x = self.state.positions()
         if self.local is not None:
-            from .garment.local import fold_marks
+            from .garment.local import fold_marks  # scipy.spatial (0.6 s): a garment refined locally
 
             return fold_marks(x, self.model.data.triangles, self.angle) | self._touching(self.model.data.triangles, x)
         tri = self.mesh.triangles

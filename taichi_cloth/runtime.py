@@ -2,17 +2,13 @@
 
 `init` starts Taichi once per process (re-initialising frees every field and costs seconds).
 `serial_loops(n)` says whether the kernels of a cloth of n particles should run their loops in one thread: on the
-CPU a parallel loop costs 60-90 us to dispatch whatever its size (measured on a 2-core x86-64 VM: an empty
-parallel loop 55-90 us, a serial pass over 20,000 vertices 4 us), so below `parallel_from` particles serial loops
-are faster. Where a pass does real work per particle the second core wins from a few thousand particles (bench
-integrators, 2 cores: at 128x128 an implicit step took 200 ms serial and 130 ms parallel, an explicit one 1.8 and
-1.1 ms; at 64x64 the explicit step 0.55 and 0.39 ms, the implicit one the same), hence 4096; set it with
-`init(..., parallel_from=n)` or the environment variable TAICHI_CLOTH_PARALLEL_FROM. A GPU runs every loop in
-parallel.
+CPU a parallel loop costs more to dispatch than a small pass costs to run, so below `parallel_from` particles
+(4096 by default; `init(..., parallel_from=n)` or the environment variable TAICHI_CLOTH_PARALLEL_FROM) serial
+loops are faster (the measurements behind 4096: docs/performance.md, "Why the defaults are what they are"). A GPU
+runs every loop in parallel.
 Taichi writes the kernels it compiled into its offline cache only when its runtime is finalised (ti.reset or a
-new ti.init), which a plain interpreter exit does not do: `init` registers that at exit. Without it only kernels
-compiled before some re-initialisation were ever cached: a process's first scene loaded in 3 s, every later one
-(new fields, so new kernels) compiled for 12-13 s in every run (the 4-8 T-shirt, measured).
+new ti.init), which a plain interpreter exit does not do: `init` registers that at exit (without it every scene
+after a process's first compiled its kernels again in every run).
 `CompileCounter` counts kernel compilations so tests can show that a scene compiles only what it
 names and that changing a parameter never recompiles.
 """
@@ -23,6 +19,9 @@ import os
 
 import taichi as ti
 from taichi.lang import impl
+from taichi.lang.misc import is_arch_supported
+
+from clothbase.errors import warn
 
 _ARCHS = {"cpu": ti.cpu, "gpu": ti.gpu, "cuda": ti.cuda, "vulkan": ti.vulkan}
 _current_arch: str | None = None
@@ -75,10 +74,6 @@ GPU_ARCHS = ("cuda", "vulkan", "metal")
 
 def gpu_arch():
     """The first GPU backend of GPU_ARCHS this machine supports, or ti.cpu with one warning line when none is."""
-    from taichi.lang.misc import is_arch_supported
-
-    from clothbase.errors import warn
-
     for name in GPU_ARCHS:
         if is_arch_supported(getattr(ti, name)):
             return getattr(ti, name)

@@ -64,7 +64,8 @@ and a component whose table is absent is never built. The schema (units in brack
                                   # max_force [N] = 5 (cap per pair), stiffness [N/m] (default sheet modulus / 2),
                                   # epsilon [m] = 0.002 and energy_tolerance = 0.01 (when sewing stops), gravity =
                                   # false (while sewing), join = "merge" | "spring" | "none", join_stiffness [N/m],
-                                  # max_time [s] = 10
+                                  # max_time [s] = 10, stall_gap = 0.25 (a stalled seam closes below this
+                                  # fraction of the seam spacing)
     [body]                        # morph the mannequin to measured girths [m] (taichi_cloth.body; Zhang et al. 2017):
     waist = 0.80                  # any of chest, underbust, waist, hips, neck, upper_arm, thigh (tape girths)
     morph = "before"              # "before": the run starts on the morphed body (a garment is placed on it);
@@ -82,11 +83,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from .assembly import STEP_GUARDS
+from .body.landmarks import Body
 from .builder import ClothBuilder
-from .errors import MeshError, PatternError, SceneError
+from .errors import BodyError, MeshError, PatternError, SceneError
+from .garment.garment import build_garment
+from .garment.garmentfile import load_garment
+from .garment.levels import multilevel_garment
 from .guards import check_memory, check_precision, grid_particles
 from .integrators import INTEGRATORS
-from .quality import QUALITIES
+from .quality import QUALITIES, coarsen_resolution, preset
 from .scene import Scene
 from .schema import MATERIAL_TABLE, Array, Field, Table, Validator, at_least, material_of, nonneg, positive, read_toml
 
@@ -160,7 +165,7 @@ SCHEMA = Table({
                      "epsilon": Field("number", 0.002, positive), "energy_tolerance": Field("number", 1e-2, positive),
                      "gravity": Field("bool", False), "join": Field("str", "merge", choices=("merge", "spring", "none")),
                      "join_stiffness": Field("number", None, positive), "max_time": Field("number", 10.0, positive),
-                     "stiffness": Field("number", None, positive)}),
+                     "stall_gap": Field("number", 0.25, positive), "stiffness": Field("number", None, positive)}),
     "body": Table({**{g: Field("number", None, positive) for g in BODY_GIRTHS},
                    "morph": Field("str", "before", choices=("before", "during")),
                    "morph_time": Field("number", 1.0, positive), "tolerance": Field("number", 1e-3, positive)}),
@@ -291,9 +296,6 @@ def build_scene(cfg: dict) -> Scene:
             g = cloth_cfg["grid"]
             data = ClothBuilder.grid(g["size"], g["resolution"], mat, g["center"], g["plane"])
         elif cloth_cfg.get("garment") is not None:
-            from .garment.garment import build_garment
-            from .garment.garmentfile import load_garment
-
             path = Path(cloth_cfg["garment"])
             path = path if path.is_absolute() else cfg["_base_dir"] / path
             spec = load_garment(path, material=mat if cloth_cfg.get("material") else None)
@@ -301,8 +303,6 @@ def build_scene(cfg: dict) -> Scene:
             if ml is None:
                 data = build_garment(spec, body, seam_stiffness=stiffness)
             else:  # sewn on a coarse level, refined as the drape settles
-                from .garment.levels import multilevel_garment
-
                 spec.levels = ml["levels"] or spec.levels
                 data = multilevel_garment(spec, body, stiffness, ml["start_level"] - 1)
         else:
@@ -341,8 +341,7 @@ def _body(table: dict, colliders: list, label: str):
     """(garment placement Body or None, the Scene's body_morph or None, collider specs) of a [body] table: the
     mannequin is fitted to the girths now; "before" puts the fitted body in the mannequin colliders (and places
     a garment on it), "during" hands its weights to the scene to morph toward."""
-    from .body import fit_body
-    from .errors import BodyError
+    from .body import fit_body  # scipy (0.5 s to import): only a [body] table fits a body
 
     girths = {g: table[g] for g in BODY_GIRTHS if table[g] is not None}
     try:
@@ -351,8 +350,6 @@ def _body(table: dict, colliders: list, label: str):
         raise SceneError(f"{label}: [body]: {exc}") from None
     if table["morph"] == "during":
         return None, {"weights": fit.weights, "duration": table["morph_time"]}, colliders
-    from .garment.placement import Body
-
     morphed = [dict(c, vertices=fit.vertices, triangles=fit.triangles, path="mannequin (fitted)")
                if c["type"] == "mesh" and c.get("path") == "mannequin" else c for c in colliders]
     return Body.from_mesh(fit.vertices, fit.triangles), None, morphed
@@ -377,8 +374,6 @@ def _apply_quality(cfg: dict) -> None:
     """Replace the config's integrator (name, options, dt) by its quality preset's and move the cloth to the
     preset's 4-8 level: fewer [multilevel] levels, or a coarser [cloth.grid] resolution (a mesh or garment
     cloth keeps its mesh). The chosen preset is kept as cfg["_quality"] (the CLI prints it)."""
-    from .quality import coarsen_resolution, preset
-
     p = preset(cfg["quality"])
     cfg["integrator"] = {"name": p.integrator, "step_guard": cfg["integrator"]["step_guard"], **p.options,
                          "dt": p.dt if p.dt is not None else "auto"}

@@ -8,7 +8,7 @@ The highest linear frequency omega_max of a cloth sets the explicit integrators'
                        1.6-1.8x above the exact value on cloth sheets (it caps the estimate).
   omega_max_exact      dense eigenvalues of the same matrix, for small models (tests and the stability study).
 Damping enters through each integrator's closed-form condition (`Integrator.is_stable`).
-`highest_mode` gives the shape of the highest mode, on which taichi_cloth.bench.probes measures the critical step
+`highest_mode` gives the shape of the highest mode, on which taichi_cloth.stability_probes measures the critical step
 by simulation.
 """
 from __future__ import annotations

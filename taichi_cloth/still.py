@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .pattern_view import garment_spec, pattern_view, plot_pattern
 from .strain import strain_colormap, vertex_strain
 
 #: body triangles drawn at most (a regular subsample of the mesh's beyond this)
@@ -26,7 +27,7 @@ LIGHT = np.array([0.3, 0.5, 1.0]) / np.linalg.norm([0.3, 0.5, 1.0])
 def body_meshes(scene) -> list:
     """(vertices (V,3) [m], triangles (T,3)) of every mesh collider of the scene (the body, as it is now) and of
     every sphere collider (an icosphere)."""
-    import trimesh
+    import trimesh  # 0.7 s to import: only to draw a sphere collider
 
     colliders = scene.controller("colliders")
     if colliders is None:
@@ -69,7 +70,7 @@ def _shade(points: np.ndarray, rgb: np.ndarray, right: np.ndarray, toward: np.nd
 def render_still(scene, path, title: str | None = None, full_scale: float = 0.1) -> Path:
     """Write a PNG at `path` of the scene's cloth as it is now (strain colours, red at `full_scale` strain) and its
     mesh bodies (light grey), front and side views. Returns the path."""
-    import matplotlib
+    import matplotlib  # 0.5 s with pyplot: only when a picture is drawn
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -121,8 +122,6 @@ def render_still(scene, path, title: str | None = None, full_scale: float = 0.1)
 def write_pictures(scene, base, name: str | None = None) -> list[Path]:
     """The still pictures of a run beside its recording: `base`.png (render_still) and, when the scene sews a
     garment, `base`-pattern.png (taichi_cloth.pattern_view.plot_pattern). base: a path without suffix."""
-    from .pattern_view import garment_spec, pattern_view, plot_pattern
-
     base = Path(base)
     out = [render_still(scene, base.with_name(base.name + ".png"))]
     spec = garment_spec(scene)

@@ -5,6 +5,7 @@ still images (strain_colormap: one colour map for all of them), and by the flatt
 """
 from __future__ import annotations
 
+import io
 from dataclasses import dataclass
 
 import numpy as np
@@ -62,15 +63,13 @@ class StrainColorMap:
     def matplotlib(self):
         """The same map as a matplotlib colormap over [0, 1] (normalise strains by full_scale, or per cent by
         range_percent[1]); matplotlib is imported on call."""
-        from matplotlib.colors import LinearSegmentedColormap
+        from matplotlib.colors import LinearSegmentedColormap  # matplotlib (0.2 s to import): only for a plot
 
         return LinearSegmentedColormap.from_list(self.name, [(f, np.asarray(rgb) / 255.0) for f, rgb in self.stops])
 
     def legend_png(self, width_px: int = 900, height_px: int = 110) -> bytes:
         """A horizontal colour bar, ticked in per cent over range_percent, as PNG bytes (matplotlib, Agg)."""
-        import io
-
-        from matplotlib.colorbar import ColorbarBase
+        from matplotlib.colorbar import ColorbarBase  # matplotlib (0.2 s to import): only for a legend
         from matplotlib.colors import Normalize
         from matplotlib.figure import Figure
 

@@ -34,12 +34,12 @@ from .control import Controller
 class StretchLimit(Controller):
     """The scene's stretch limit, applied after every step (a controller).
 
-    max_strain: allowed relative elongation (0.1 = 10 %); iterations: the most Jacobi passes per step;
+    contacts: the scene's Contacts (None without colliders); max_strain: allowed relative elongation (0.1 = 10 %); iterations: the most Jacobi passes per step;
     tolerance: stop once every limited spring is within max_strain + tolerance (strain units);
     omega: over-relaxation of the averaged correction; kinds: spring kinds limited (default structural
     and shear, as Provot)."""
 
-    def __init__(self, model, state, max_strain: float = 0.1, iterations: int = 100, tolerance: float = 1e-3,
+    def __init__(self, model, state, contacts=None, max_strain: float = 0.1, iterations: int = 100, tolerance: float = 1e-3,
                  omega: float = 1.5, kinds=(SpringKind.STRUCTURAL, SpringKind.SHEAR)):
         if max_strain <= 0:
             raise ValueError(f"stretch limit max_strain must be > 0, got {max_strain}")
@@ -51,7 +51,7 @@ class StretchLimit(Controller):
             raise ValueError(f"stretch limit omega must lie in (0, 2), got {omega}")
         self.model, self.state = model, state
         #: the contact normals of the scene's colliders (None without colliders): see _correction
-        self.contacts = getattr(state, "contacts", None)
+        self.contacts = contacts
         self.has_contacts = self.contacts is not None  # compile-time: no colliders, no contact code
         self.max_strain, self.iterations = float(max_strain), int(iterations)
         self.tolerance, self.omega = float(tolerance), float(omega)

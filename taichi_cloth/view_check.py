@@ -71,7 +71,7 @@ def cloth_pixels(rgb: np.ndarray) -> np.ndarray:
 
 def check_panel(png: Path) -> PanelCheck:
     """Crop the 3D panel (PANEL_3D) out of a screenshot and measure it."""
-    from matplotlib.image import imread
+    from matplotlib.image import imread  # matplotlib (0.2 s to import): only when a screenshot is checked
 
     img = imread(png)
     rgb = (img[..., :3] * 255).astype(np.uint8) if img.dtype != np.uint8 else img[..., :3]
@@ -174,7 +174,7 @@ def main(argv=None) -> int:
         print(f"error: {CHROMIUM} not found: install Debian's chromium (`make view-check` does)", file=sys.stderr)
         return 2
     try:
-        from playwright.sync_api import sync_playwright
+        from playwright.sync_api import sync_playwright  # an optional extra ('.[view]')
     except ImportError:
         print("error: playwright is missing: pip install -e '.[view]'", file=sys.stderr)
         return 2

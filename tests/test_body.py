@@ -65,10 +65,10 @@ def test_tape_girth_bridges_a_hollow():
         tape_girth([[0, 0], [1, 1], [2, 2]])
 
 
-def test_placement_uses_the_shared_slicer():
-    from taichi_cloth.garment import placement
+def test_landmarks_use_the_shared_slicer():
+    from taichi_cloth.body import landmarks
 
-    assert placement._Mesh is section.MeshSlicer and placement._girth is section.loop_girth
+    assert landmarks.MeshSlicer is section.MeshSlicer and landmarks.loop_girth is section.loop_girth
     hull = convex_hull([[0, 0], [1, 0], [1, 1], [0, 1], [0.5, 0.5], [0.5, 0]])
     assert len(hull) == 4 and hull_perimeter(hull) == pytest.approx(4.0)
 
@@ -165,7 +165,7 @@ def test_from_meshes_refuses_another_topology(tmp_path):
 # ------------------------------------------------------------------------------------------ girth gauge
 
 def test_gauge_agrees_with_placement_hull_girths(model, base_girths):
-    from taichi_cloth.garment.placement import Body
+    from taichi_cloth.body.landmarks import Body
 
     blend, gauge = model
     body = Body.from_mesh(blend.base, blend.triangles)

@@ -197,7 +197,7 @@ def test_fuzzy_ranking_finds_the_same_contacts_with_fewer_tests():
         sc.step(120)  # settles onto head and shoulders (deterministic: identical in both modes so far?)
         body.reset_counters()
         sc.step(30)
-        touching = int((np.linalg.norm(sc.state.contacts.normal.to_numpy(), axis=1) > 0).sum())
+        touching = int((np.linalg.norm(sc.contacts.normal.to_numpy(), axis=1) > 0).sum())
         results[mode] = (sc.positions(), body.counter_values(), touching)
     (x_exact, c_exact, _), (x_fuzzy, c_fuzzy, _) = results["exact"], results["fuzzy"]
     assert np.abs(x_exact - x_fuzzy).max() < 1e-4
@@ -233,7 +233,7 @@ def test_implicit_solves_respect_contacts_no_stretch_around_a_small_ball():
     sc.state.set(v=np.tile([0.0, -1.0, 0.0], (900, 1)))
     peak = max(sc.step(30).max_strain for _ in range(6))
     assert peak < 0.15
-    assert np.linalg.norm(sc.state.contacts.normal.to_numpy(), axis=1).max() == pytest.approx(1.0, abs=1e-5)
+    assert np.linalg.norm(sc.contacts.normal.to_numpy(), axis=1).max() == pytest.approx(1.0, abs=1e-5)
 
 
 @pytest.mark.slow

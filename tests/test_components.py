@@ -4,6 +4,7 @@ import pytest
 import taichi as ti
 
 import taichi_cloth as tc
+from taichi_cloth.frame import scene_snapshot
 
 
 def names(counter):
@@ -19,7 +20,7 @@ def test_unnamed_components_are_never_built_or_compiled():
         sc = tc.Scene(grid(), integrator="approx-implicit", dt=0.005, pins=[{"indices": [30, 35]}])
         sc.step(3)
     assert [c.name for c in sc.controllers] == ["pins"] and not sc.controller("pins").moving
-    assert sc.forces.sources == () and sc.state.contacts is None
+    assert sc.forces.sources == () and sc.contacts is None
     compiled = cc.names()
     for absent in ("Wind", "VertexNormals", "StretchLimit", "PinDriver", "Implicit", "FusedSteps"):
         assert not any(name.split(".")[0] == absent for name in compiled), compiled
@@ -107,7 +108,7 @@ def test_a_feature_is_a_controller_added_without_touching_the_loop():
     assert sc.controller("zero_g") is zero_g
     summary = sc.run(5, progress=False)
     assert zero_g.steps == 10 and zero_g.frames == [1, 2, 3, 4, 5] and summary.events == ["gravity off"]
-    assert sc.snapshot(5, sc.measure()).scalars["zero_g/steps"] == 10
+    assert scene_snapshot(sc, 5, sc.measure()).scalars["zero_g/steps"] == 10
     v = sc.velocities()  # free flight from frame 3 on: every particle keeps its velocity (drag aside)
     sc.run(1, progress=False)
     np.testing.assert_allclose(sc.velocities(), v * (1 - 0.1 / 120) ** 2, rtol=1e-3, atol=1e-5)
@@ -127,3 +128,20 @@ def test_the_kernels_a_process_compiled_are_in_the_offline_cache_after_it_exits(
               "tc.Scene(cloth, integrator='explicit', dt=1e-3).step(1)\n")
     subprocess.run([sys.executable, "-c", script], check=True, capture_output=True, timeout=300)
     assert list(cache.rglob("*.tic")), sorted(p.name for p in cache.rglob("*"))
+
+
+def test_a_step_refuses_a_state_its_kernels_were_not_built_for():
+    """A Taichi kernel binds the fields it reads when it compiles: the integrator and the collision stage step only
+    the state and contacts they were built with, and say so for another."""
+    a = tc.Scene(grid(), integrator="explicit", dt=5e-4, colliders=[{"type": "sphere", "center": [0, 0, 0],
+                                                                      "radius": 0.1}])
+    b = tc.Scene(grid(), integrator="explicit", dt=5e-4, colliders=[{"type": "sphere", "center": [0, 0, 0],
+                                                                      "radius": 0.1}])
+    with pytest.raises(ValueError, match="built for another state"):
+        a.integrator.step(b.state, a.contacts, 5e-4)
+    with pytest.raises(ValueError, match="built for another contacts"):
+        a.integrator.step(a.state, b.contacts, 5e-4)
+    with pytest.raises(ValueError, match="built for another state"):
+        a.collision.collide(b.state, a.contacts, 5e-4)
+    a.substep(5e-4)  # its own state: one step as a run takes it
+    assert a.state.t == pytest.approx(5e-4) and a.steps_taken == 1

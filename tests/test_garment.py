@@ -49,6 +49,33 @@ def test_seam_pairs_follow_the_picks_never_crosswise():
     np.testing.assert_allclose(a[:, 1] + b[:, 1], 0.2, atol=1e-12)
 
 
+@pytest.mark.parametrize("gap, joins", [(0.006, True), (0.008, False)])
+def test_a_seam_that_stalls_short_of_epsilon_joins_below_a_quarter_of_its_spacing(gap, joins):
+    """Two squares pinned along their outer sides, each pair's pull capped at 0.2 N: the cloth's tension holds the
+    seam open about 2 mm short of the placed gap (4 mm from 6 mm, 6 mm from 8 mm), far above epsilon = 0.5 mm. A
+    stalled gap below a quarter of the 20 mm spacing (5 mm) joins, whatever round-off makes of it; one above
+    that does not, and sewing gives up at max_time naming the open seam."""
+    seam = Seam("middle", SeamSide("A", "br", "tr"), SeamSide("B", "bl", "tl"))
+    spec = GarmentSpec("two squares", [square("A"), square("B")], [seam],
+                       {"A": FreePlacement((0.0, 0.0, 0.0)), "B": FreePlacement((0.2 + gap, 0.0, 0.0))}, spacing=0.02)
+    g = build_garment(spec)
+    outer = [{"box": [[-0.01, -1, -1], [0.001, 1, 1]]}, {"box": [[0.4 + gap - 0.001, -1, -1], [0.5, 1, 1]]}]
+    scene = tc.Scene(g, integrator="implicit", dt=1 / 240, gravity=(0, 0, 0), pins=outer,
+                     sewing=dict(max_force=0.2, epsilon=0.0005, max_time=0.5))
+    summary = scene.run(32, progress=False)
+    sewing = scene.controller("sewing")
+    assert sewing.stall_gap == pytest.approx(0.005, rel=1e-9)  # a quarter of the seam's 20 mm spacing
+    stalled = sewing.history[-1].max if not joins else \
+        [h for h in sewing.history if h.t <= sewing.closed_at + 1e-9][-1].max
+    assert abs(stalled - (gap - 0.002)) < 0.0005, stalled
+    assert sewing.joined is joins and sewing.gave_up is not joins
+    if joins:
+        assert sewing.closed_at < 0.3 and any("stalled at a largest gap" in e for e in summary.events)
+        assert summary.n_particles == g.data.n_particles - len(g.seam_pairs)
+    else:
+        assert any("open seams middle" in w for w in summary.warnings), summary.warnings
+
+
 def test_two_squares_close_below_epsilon_and_stay_below_the_stretch_limit():
     g = build_garment(two_squares())
     scene = tc.Scene(g, integrator="implicit", dt=1 / 240, gravity=(0, 0, 0), stretch_limit=dict(max_strain=0.1),
@@ -156,7 +183,7 @@ GARMENTS = Path(__file__).resolve().parents[1] / "demos" / "garments"
 
 @pytest.fixture(scope="module")
 def body():
-    from taichi_cloth.garment.placement import Body
+    from taichi_cloth.body.landmarks import Body
 
     return Body.from_mannequin()
 

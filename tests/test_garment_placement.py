@@ -1,13 +1,14 @@
 """Placement of 2D pattern pieces around the shipped mannequin (taichi_cloth.garment.placement): the body's
-landmarks, parts and frames, and the wrap rule (arc length kept along rows, clearance, little stretch)."""
+landmarks, parts and frames (taichi_cloth.body.landmarks), and the wrap rule (arc length kept along rows, clearance, little stretch)."""
 import math
 
 import numpy as np
 import pytest
 
 from collision.mannequin import load_mannequin
+from taichi_cloth.body.landmarks import PARTS, Body, _ray_hits
 from taichi_cloth.errors import PatternError
-from taichi_cloth.garment.placement import PARTS, Body, Placement, _ray_hits, place
+from taichi_cloth.garment.placement import Placement, place
 
 OFFSET = 0.02
 

@@ -47,8 +47,8 @@ def filtered_solve(sc) -> np.ndarray:
     D = damping_matrix(d, x)
     A = np.diag(np.repeat(d.mass, 3) * (1 + H * GAMMA)) + H * D + H * H * K
     rhs = H * f.reshape(-1) - H * H * K @ v.reshape(-1)
-    normals = sc.state.contacts.normal.to_numpy()[: d.n_particles]
-    stuck = sc.state.contacts.stuck.to_numpy()[: d.n_particles] != 0
+    normals = sc.contacts.normal.to_numpy()[: d.n_particles]
+    stuck = sc.contacts.stuck.to_numpy()[: d.n_particles] != 0
     columns = []
     for i in range(d.n_particles):
         if sc.model.pinned[i] or stuck[i]:
@@ -74,7 +74,7 @@ def solve_after_friction(sc) -> None:
     filtered_solve."""
     sc.integrator._contact_friction = lambda dt: None
     try:
-        sc.integrator.step(sc.dt)
+        sc.integrator.step(sc.state, sc.contacts, sc.dt)
     finally:
         del sc.integrator._contact_friction
 
@@ -83,10 +83,10 @@ def solve_after_friction(sc) -> None:
 def test_a_step_equals_the_direct_solve_of_the_filtered_system(preconditioner):
     sc = sheet_on_a_ball(preconditioner, newton_iterations=1, line_search=False)
     assert sc.model.pinned.sum() > 0
-    touching = np.linalg.norm(sc.state.contacts.normal.to_numpy()[: sc.model.data.n_particles], axis=1) > 0
+    touching = np.linalg.norm(sc.contacts.normal.to_numpy()[: sc.model.data.n_particles], axis=1) > 0
     assert 4 < touching.sum() < sc.model.data.n_particles - 10  # some particles on the ball, most free
     expected = filtered_solve(sc)
-    stuck = sc.state.contacts.stuck.to_numpy()[: sc.model.data.n_particles] != 0
+    stuck = sc.contacts.stuck.to_numpy()[: sc.model.data.n_particles] != 0
     assert stuck.sum() >= 1 and (touching & ~stuck).sum() >= 4  # held by static friction, and sliding
     v = sc.velocities()
     solve_after_friction(sc)
@@ -121,9 +121,9 @@ def test_a_v_cycle_is_symmetric_and_positive_on_the_free_rows():
     assert np.abs(z1[~free]).max() == 0
     # with the contacts: particles held by static friction are held by the cycle as pins are (what the filtered
     # system does), and a sliding contact's normal is left out: the cycle's output has no component along it
-    stuck = sc.state.contacts.stuck.to_numpy()[: sc.model.data.n_particles] != 0
+    stuck = sc.contacts.stuck.to_numpy()[: sc.model.data.n_particles] != 0
     assert stuck.sum() >= 1
-    n = sc.state.contacts.normal.to_numpy()[: sc.model.data.n_particles]
+    n = sc.contacts.normal.to_numpy()[: sc.model.data.n_particles]
     sliding = free & ~stuck & (np.linalg.norm(n, axis=1) > 0)
     assert sliding.sum() >= 4
     mg.prepare(system, sc.integrator.filter)
@@ -224,7 +224,7 @@ def test_a_step_of_a_sewn_garment_equals_the_direct_solve(preconditioner):
     sc = sewn_pair_on_a_ball(preconditioner, newton_iterations=1, line_search=False)
     n = sc.model.data.n_particles
     assert n == 2 * 11 * 11 - 11 and sc.model.pinned.sum() == 21
-    touching = np.linalg.norm(sc.state.contacts.normal.to_numpy()[:n], axis=1) > 0
+    touching = np.linalg.norm(sc.contacts.normal.to_numpy()[:n], axis=1) > 0
     assert 4 < touching.sum() < n - 10, touching.sum()
     mg = sc.integrator.policy.current
     if preconditioner == "multigrid":
@@ -269,8 +269,8 @@ def test_an_aggregation_v_cycle_is_symmetric_and_positive_and_its_levels_are_gal
     K = stiffness_matrix(x, d.springs, d.stiffness, d.rest_length)
     D = damping_matrix(d, x)
     A = np.diag(np.repeat(d.mass, 3) * (1 + H * GAMMA)) + H * D + H * H * K
-    normals = sc.state.contacts.normal.to_numpy()[:n]
-    held = sc.model.pinned | (sc.state.contacts.stuck.to_numpy()[:n] != 0)
+    normals = sc.contacts.normal.to_numpy()[:n]
+    held = sc.model.pinned | (sc.contacts.stuck.to_numpy()[:n] != 0)
     S = np.zeros((3 * n, 3 * n))
     for i in range(n):
         nn = normals[i] @ normals[i]
@@ -336,7 +336,7 @@ def test_a_garment_on_its_4_8_levels_uses_them_once_merged_and_a_step_equals_the
     assert levels.active == 1 and sc.model.data.n_particles == mg.levels[1].merged.n_particles
     sc.run(12, progress=False)  # on the sphere (contacts), the seams merged
     n = sc.model.data.n_particles
-    touching = np.linalg.norm(sc.state.contacts.normal.to_numpy()[:n], axis=1) > 0
+    touching = np.linalg.norm(sc.contacts.normal.to_numpy()[:n], axis=1) > 0
     assert 4 < touching.sum() < n - 10, touching.sum()
     expected = filtered_solve(sc)
     v = sc.velocities()

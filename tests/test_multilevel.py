@@ -240,10 +240,10 @@ max_time = 0.2
 
 @pytest.mark.slow
 def test_an_outline_hierarchy_drapes_through_its_levels_with_its_mass():
-    """A pattern piece with a curved outline (multilevel.outline): every level carries the same mass, and a
+    """A pattern piece with a curved outline (taichi_cloth.garment.outline): every level carries the same mass, and a
     switch places each new particle by the level's prolongation table (barycentric inside, arc midpoints on
     the boundary, so that seam partners stay paired)."""
-    from multilevel.outline import outline_hierarchy
+    from taichi_cloth.garment.outline import outline_hierarchy
     from taichi_cloth.multilevel_cloth import multilevel_cloth
 
     t = np.linspace(0.0, 2 * np.pi, 200)

@@ -21,9 +21,9 @@ import importlib.util
 import numpy as np
 import pytest
 
-from taichi_cloth.bench.accuracy import run_sampled
-from taichi_cloth.bench.peer_taichi_example import (ExamplePhysics, ExampleUnavailable, TaichiExample, example_path,
-                                                    headless_source, run_example)
+from benchmarks.accuracy import run_sampled
+from benchmarks.peer_taichi_example import (ExamplePhysics, ExampleUnavailable, TaichiExample, example_path,
+                                          headless_source, run_example)
 
 pytestmark = pytest.mark.slow  # each runs Taichi's example and our engine against a reference (tens of seconds)
 
@@ -141,7 +141,7 @@ def test_substitutions_are_checked():
 def test_warp_same_physics_matches_ours_before_contact():
     """Warp's SemiImplicitIntegrator is our explicit scheme: before contact (no ball force) the two agree to float32
     round-off (measured 6e-8 m), where a wrong sign of gravity or a missing drag would be centimetres off."""
-    from taichi_cloth.bench.peer_warp import WarpSamePhysics, run_same_physics, warp_status
+    from benchmarks.peer_warp import WarpSamePhysics, run_same_physics, warp_status
 
     if warp_status()[0] is not None:
         pytest.skip(warp_status()[0])

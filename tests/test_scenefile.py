@@ -38,7 +38,7 @@ def test_good_file_builds_what_it_names(tmp_path):
     assert sc.model.data.n_particles == 36 and sc.model.pinned.sum() == 2
     assert sc.model.data.mass.sum() == pytest.approx(tc.MATERIALS["silk"].density * 0.25)
     assert [c.name for c in sc.controllers] == ["pins"] and not sc.controller("pins").moving
-    assert sc.forces.sources == () and sc.state.contacts is None
+    assert sc.forces.sources == () and sc.contacts is None
 
 
 def test_colliders_from_a_file(tmp_path):

@@ -5,7 +5,7 @@ evaluated at the exact highest linear frequency) says so with a 10 % margin, and
 clean BlowUpError where the step is 1.5 x beyond it. The two implicit schemes must stay finite
 everywhere (with a little damping). Nothing may ever produce NaN silently. One scene per integrator and
 mass ratio is reused across the sweep (stiffness written to a field, dt passed as an argument), so the
-whole sweep compiles each kernel once (taichi_cloth.bench.probes.probe_scene, shared with `bench stability`).
+whole sweep compiles each kernel once (taichi_cloth.stability_probes.probe_scene, shared with `bench stability`).
 
 Where the theory is exact (a 1D chain, docs/algorithms.md) the critical step measured by bisection matches the
 closed forms: sqrt(m/k) within 1 % undamped, 2/omega_max closer still, and the damped variants' conditions.
@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 
 import taichi_cloth as tc
-from taichi_cloth.bench.probes import (PROBE_AIR as AIR, PROBE_BETA as BETA, critical_step, probe_run, probe_scene,
-                                       set_max_stiffness)
+from taichi_cloth.stability_probes import (PROBE_AIR as AIR, PROBE_BETA as BETA, critical_step, probe_run,
+                                          probe_scene, set_max_stiffness)
 from taichi_cloth.stability import omega_max_exact
 
 STIFFNESS = [1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7]

@@ -6,8 +6,8 @@ import csv
 import numpy as np
 import pytest
 
-from taichi_cloth.bench import tradeoff as tr
-from taichi_cloth.bench.accuracy import Trajectory, compare, pareto_front, surface_distance
+from benchmarks import tradeoff as tr
+from benchmarks.accuracy import Trajectory, compare, pareto_front, surface_distance
 from taichi_cloth.integrators import INTEGRATORS
 from taichi_cloth.quality import load_presets
 

@@ -5,19 +5,18 @@ like a tape on plane sections, and a fit of the blend-shape weights to target gi
     fit = fit_body({"chest": 0.96, "waist": 0.80, "hips": 1.00})   # the shipped mannequin
     print(fit.format())                                             # fit.vertices (V,3), fit.triangles (T,3)
 
-Modules: section (plane slices of a mesh, convex hulls; shared with garment.placement), blendshapes
-(BlendShapes: base + channels of larger/smaller limit shapes), girth (periodic_spline_length, tape_girth,
-GirthGauge), fit (fit_body, girth_ranges, BodyFit), cli (the `body` subcommand; not imported here).
-
-taichi_cloth.garment.placement imports .section, so nothing imported here may import placement at module
-import time (GirthGauge.from_body imports it when called), and the names below are exported lazily.
+Modules: section (plane slices of a mesh, convex hulls), landmarks (Body: the parts, frames, landmark heights
+and girths of a body mesh, what garment placement and the girth gauge start from), blendshapes (BlendShapes: base
++ channels of larger/smaller limit shapes), girth (periodic_spline_length, tape_girth, GirthGauge), fit (fit_body,
+girth_ranges, BodyFit), cli (the `body` subcommand; not imported here). Nothing here imports taichi_cloth.garment.
 """
 import importlib
 
-# Lazy exports (PEP 562): `import taichi_cloth` imports garment.placement, which imports .section from here, so
-# this file stays light (no scipy) and loads a submodule on the first use of one of its names.
+# Lazy exports (PEP 562): garment placement imports .landmarks from here, so this file stays light (no scipy) and
+# loads a submodule on the first use of one of its names.
 _EXPORTS = {
     "section": ("Loop", "MeshSlicer", "convex_hull", "hull_perimeter", "loop_girth", "plane_basis"),
+    "landmarks": ("Body", "BodyFrame"),
     "blendshapes": ("BlendShapes", "Channel", "Shape", "read_mesh"),
     "girth": ("GIRTHS", "GirthDefinition", "GirthGauge", "periodic_spline_length", "tape_girth"),
     "fit": ("BodyFit", "GirthOutOfRange", "default_body", "fit_body", "girth_ranges"),

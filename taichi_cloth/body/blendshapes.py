@@ -30,6 +30,8 @@ from pathlib import Path
 
 import numpy as np
 
+from collision.mannequin import load_mannequin
+
 from ..errors import BodyError, MeshError
 
 __all__ = ["MANNEQUIN_CHANNELS", "BlendShapes", "Channel", "Shape", "read_mesh"]
@@ -114,7 +116,6 @@ class BlendShapes:
         """The shipped CC0 mannequin (collision.mannequin.load_mannequin(), or the Mannequin given) with channels
         chest, underbust, waist, hips, neck, upper_arm, thigh from its measure-*-circ-incr/decr targets."""
         if mannequin is None:
-            from collision.mannequin import load_mannequin
             mannequin = load_mannequin()
         base = np.asarray(mannequin.vertices, dtype=np.float64)
         channels = {}
@@ -277,14 +278,14 @@ def read_mesh(source, what: str = "mesh"):
         if not path.is_file():
             raise MeshError(f"{what} {name}: no such file")
         if path.suffix.lower() in (".obj", ".ply", ".off", ".stl", ".glb", ".gltf"):
-            import trimesh
+            import trimesh  # 0.7 s to import: only when a mesh file is read
             try:
                 mesh = trimesh.load(path, force="mesh", process=False)
             except Exception as exc:  # trimesh raises many types for unreadable files
                 raise MeshError(f"{what} {name}: cannot read the mesh ({exc})") from None
             v, t = np.asarray(mesh.vertices), np.asarray(getattr(mesh, "faces", np.zeros((0, 3))))
         else:
-            import meshio
+            import meshio  # 0.2 s to import: only when a mesh file is read
             try:
                 m = meshio.read(path)
             except Exception as exc:  # meshio raises many types for unreadable files

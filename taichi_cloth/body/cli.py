@@ -14,7 +14,7 @@ import sys
 from pathlib import Path
 
 from ..errors import BodyError, MeshError
-from .fit import GirthOutOfRange, fit_body, girth_ranges
+from .fit import GirthOutOfRange, default_body, fit_body, girth_ranges
 from .girth import GIRTHS
 
 __all__ = ["EXIT_BAD_INPUT", "SUFFIXES", "add_parser", "format_ranges", "make_body", "run", "write_body"]
@@ -63,7 +63,7 @@ def _check_suffix(out) -> Path:
 def write_body(path, vertices, triangles) -> Path:
     """Write a body mesh (vertices (V,3) [m], triangles (T,3)) as .obj/.ply/.stl (by suffix), creating the
     folder. Vertex order is kept (OBJ/PLY), so the file reloads as a morph of the same body. Returns the path."""
-    import trimesh
+    import trimesh  # 0.7 s to import: only when a body is written
 
     path = _check_suffix(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -93,8 +93,6 @@ def run(args) -> int:
     """Execute `body` with parsed args (add_parser's options). Returns 0, or 2 after one `error:` line."""
     try:
         if getattr(args, "ranges", False):
-            from .fit import default_body
-
             blend, gauge = default_body()
             print(format_ranges(girth_ranges(blend, gauge), gauge.measure(blend.base)))
             return 0

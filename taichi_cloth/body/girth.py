@@ -17,8 +17,8 @@ splines, z >= 0 and z <= 0, as functions z(x)) and sums short chords along them.
   thigh 0.5322 / 0.5295 (+0.51 %: coarse faces, 2 cm apart, on the thigh).
 
 `GirthGauge` measures named girths on a base body and any morph of it (same vertices and triangles), without
-analysing the body again: `GirthGauge.from_body(vertices, triangles)` runs the placement analysis
-(taichi_cloth.garment.placement.Body.from_mesh, about 0.5-1 s) once, and `measure(vertices)` then takes a few
+analysing the body again: `GirthGauge.from_body(vertices, triangles)` runs the landmark analysis
+(taichi_cloth.body.landmarks.Body.from_mesh, about 0.5-1 s) once, and `measure(vertices)` then takes a few
 ms per girth. Each girth is a plane and a vertex mask fixed on the base; the plane passes through an anchor
 vertex (the base vertex nearest the landmark point), moved by a fixed offset (the landmark point minus the
 anchor on the base), so on the base the plane goes through the landmark exactly and on a morph it follows the
@@ -44,6 +44,7 @@ import numpy as np
 from scipy.interpolate import CubicSpline
 
 from ..errors import BodyError
+from .landmarks import Body
 from .section import MeshSlicer, convex_hull, hull_perimeter, plane_basis
 
 __all__ = ["GIRTHS", "GirthDefinition", "GirthGauge", "periodic_spline_length", "tape_girth"]
@@ -167,11 +168,9 @@ class GirthGauge:
     # ------------------------------------------------------------------------------------ construction
     @classmethod
     def from_body(cls, vertices, triangles, underbust_height: float | None = None) -> "GirthGauge":
-        """Analyse a closed, outward-wound body in the mannequin's convention (placement.Body.from_mesh; raises
+        """Analyse a closed, outward-wound body in the mannequin's convention (landmarks.Body.from_mesh; raises
         MeshError for an unusable mesh) once and define the girths on it. underbust_height [m]: where the
         underbust is measured (default: the chest landmark - 0.05 m)."""
-        from ..garment.placement import Body  # placement imports this package: import it only when needed
-
         body = Body.from_mesh(vertices, triangles)
         v, t = body.vertices, body.triangles
         slicer = MeshSlicer(v, t)

@@ -1,8 +1,8 @@
 """A body that morphs during a run: the scene's mesh collider moves from one set of blend-shape weights to another
 over a time window, and the cloth draped on it follows (it is pushed by the collider as the surface moves).
 
-The collider's vertices, normals and voxel grid are rebuilt at every step of the window (MeshCollider.set_vertices,
-about 9 ms for the 13k-vertex mannequin on this 2-core CPU), so the surface moves a little per step: the window
+The collider's vertices, normals and voxel grid are rebuilt at every step of the window (MeshCollider.set_vertices;
+its cost: docs/performance.md), so the surface moves a little per step: the window
 must be long enough that no vertex moves more than the collider's thickness in one step, else a particle could
 end up inside the body. `MorphingBody.check_speed` refuses windows that are too short.
 """

@@ -1,8 +1,7 @@
 """Plane sections of a triangle mesh and convex hulls of their points: the raw material of girths.
 
-Shared by the garment placement (taichi_cloth.garment.placement, which finds the body's landmarks with it) and
-by the girth gauge (taichi_cloth.body.girth). Numpy only; imports nothing from taichi_cloth, so that both can
-import it.
+Shared by the body's landmarks (taichi_cloth.body.landmarks, which finds them with it) and by the girth gauge
+(taichi_cloth.body.girth). Numpy only.
 
 - `MeshSlicer(vertices, triangles)`: vertices (V,3) float64 [m], triangles (T,3) int64; builds the unique edges
   once (clothbase.meshes.edges_of) and cuts the surface with planes: `slice(origin, normal, vmask)` returns

@@ -38,10 +38,14 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
+import ezdxf
 import numpy as np
+from ezdxf import bbox
+from ezdxf.lldxf.validator import is_valid_layer_name
+from ezdxf.math import rational_bspline_from_ellipse
 
-from taichi_cloth.errors import PatternError
-from taichi_cloth.garment.pattern import UNITS, PatternPiece, Segment, open_uniform_knots, unit_scale
+from ..errors import PatternError
+from .pattern import UNITS, PatternPiece, Segment, open_uniform_knots, unit_scale
 
 __all__ = ["read_dxf", "write_dxf"]
 
@@ -112,8 +116,6 @@ def read_dxf(path, units: str | None = None, tolerance: float | None = None) -> 
 
 
 def _open(path: Path):
-    import ezdxf
-
     if not path.is_file():
         raise PatternError(f"DXF file {path} not found")
     try:
@@ -193,8 +195,6 @@ def _source_loops(src: _Source, path: Path, scale: float, unit_name: str, tolera
 
 
 def _default_tol(entities, scale: float) -> float:
-    from ezdxf import bbox
-
     box = bbox.extents(entities, fast=True)
     diag = float(box.size.magnitude) if box.has_data else 0.0
     return max(1e-5 * diag * scale, 1e-9)
@@ -337,8 +337,6 @@ def _spline_chunk(e, scale: float) -> _Chunk:
 
 
 def _ellipse_chunk(e, scale: float) -> _Chunk:
-    from ezdxf.math import rational_bspline_from_ellipse
-
     bs = rational_bspline_from_ellipse(e.construction_tool())
     seg = Segment("bspline", np.array([_xy(p) for p in bs.control_points]) * scale, degree=int(bs.degree),
                   knots=[float(k) for k in bs.knots()], weights=[float(w) for w in bs.weights()] or None)
@@ -448,9 +446,6 @@ def write_dxf(pieces, path, units: str = "mm") -> Path:
 
     Each piece on its own layer (the piece name), segments as entities in loop order, corner names as TEXT
     at the corners (height 1% of the piece size)."""
-    import ezdxf
-    from ezdxf.lldxf.validator import is_valid_layer_name
-
     path = Path(path)
     scale = unit_scale(units)
     pieces = list(pieces)

@@ -12,13 +12,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..body.landmarks import Body
 from ..cloth import ClothData, SpringKind, mesh_cloth
 from ..errors import PatternError
 from ..material import Material
 from ..material import material as as_material
 from .mesh import level_mesh, mesh_piece
 from .pattern import PatternPiece
-from .placement import Body, place
+from .placement import place
 from .seams import pair_sides, plan_counts, side_vertices
 
 

@@ -102,7 +102,7 @@ def _spec(cfg: dict, path: Path, material: Material | None) -> GarmentSpec:
     s = unit_scale(cfg["units"])
     dxf_pieces = None
     if cfg["dxf"] is not None:
-        from .dxf import read_dxf
+        from .dxf import read_dxf  # ezdxf (0.5 s to import): only a garment drawn in a DXF file
 
         dxf_path = Path(cfg["dxf"])
         dxf_pieces = {p.name: p for p in read_dxf(dxf_path if dxf_path.is_absolute() else path.parent / dxf_path)}

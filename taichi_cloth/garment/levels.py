@@ -1,6 +1,6 @@
 """A garment on its 4-8 levels (Hsiao 2006 section 2.2): sewn on a coarse level, refined as the drape settles.
 
-The pieces are meshed once as outline hierarchies (multilevel.outline), so every level pairs its seams (the sides
+The pieces are meshed once as outline hierarchies (garment.outline), so every level pairs its seams (the sides
 of a seam have equal counts on every level). Per level there is a GarmentCloth (the pieces apart, with that level's
 seam springs: what the sewing works on, on the start level) and the same cloth with its seams merged (what the
 refiner switches between once the seams are joined). The merge is the sewing's own (sewing.merge_seams), applied to
@@ -23,12 +23,12 @@ import numpy as np
 from clothbase.meshes import edges_of
 from multilevel.hierarchy import Hierarchy48, Level, identity_tables
 
+from ..body.landmarks import Body
 from ..cloth import ClothData
 from ..errors import PatternError
 from ..multilevel_cloth import MultilevelCloth
 from .garment import GarmentCloth, GarmentLevelPlan, GarmentSpec, plan_garment_levels
 from .mesh import level_mesh
-from .placement import Body
 from .sewing import merge_seams
 
 

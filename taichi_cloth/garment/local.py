@@ -2,7 +2,7 @@
 elsewhere, the mesh conforming everywhere, across the seams too.
 
 Why not the 4-8 bisection of a grid (multilevel.hierarchy.refine_local): an outline level is a 4-8 lattice inside
-a band that is re-triangulated on every level (multilevel.outline), so the band's triangles are not bisected into
+a band that is re-triangulated on every level (garment.outline), so the band's triangles are not bisected into
 the next level's, their edge midpoints are not vertices of the next level, and a merged vertex's pattern point is
 in one piece's coordinates only (a triangle across a seam has no uv of its own). What the levels do share are their
 vertices: every vertex of level k is a vertex of level k + 1 at the same pattern point (the boundary samples and
@@ -29,10 +29,10 @@ import numpy as np
 from scipy.spatial import Delaunay
 
 from multilevel.hierarchy import Level
-from multilevel.outline import inside_polygon, locate
 
 from .levels import GarmentLevel, MultilevelGarment
 from .mesh import PieceMesh, mesh_quality
+from .outline import inside_polygon, locate
 from .sewing import merge_seams
 
 

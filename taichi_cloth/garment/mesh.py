@@ -1,6 +1,6 @@
 """Meshing of pattern pieces: particles and triangles inside the outline, boundary sampled at a chosen spacing.
 
-A piece is meshed by the multilevel outline mesher (multilevel.outline): a 4-8 interior lattice plus a
+A piece is meshed by the multilevel outline mesher (garment.outline): a 4-8 interior lattice plus a
 Delaunay band along the boundary, with every outline segment resampled at uniform arc length to an exact
 number of intervals. Exact counts are what let a seam pair its two sides point for point; the 4-8 interior is
 what makes the piece a level of a multilevel hierarchy when a scene asks for levels (`levels` > 1).
@@ -14,9 +14,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from multilevel.hierarchy import signed_areas
-from multilevel.outline import OutlineHierarchy, outline_hierarchy
 
 from ..errors import PatternError
+from .outline import OutlineHierarchy, outline_hierarchy
 from .pattern import PatternPiece
 
 MIN_ANGLE_DEG = 10.0  # below this a triangle is a sliver: its springs are nearly collinear and stiff in one direction

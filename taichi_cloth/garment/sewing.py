@@ -13,7 +13,12 @@ spring's rest length), so the closing speed is min(close_speed, max_force / (k_s
 Sewing stops when every pair is closer than `epsilon` and the elastic energy changed by less than
 `energy_tolerance` over the last frame, relative to the energy itself or, when that is smaller, to the energy of
 one seam pair held at the closing gap (below that a change is round-off: two flat squares sewn in zero gravity
-end with 1e-11 J whose frame-to-frame noise is tens of per cent). Then the pairs are joined: merged into one
+end with 1e-11 J whose frame-to-frame noise is tens of per cent). A seam can also stall short of `epsilon`: once
+the ramp has reached zero rest length the pull k_s l of a pair balances the cloth's tension and the body's
+contact, at a gap that round-off decides (a skirt on a coarse level held 3.3 mm on one machine and closed below
+2 mm on another). So a largest gap that has stopped shrinking (by less than STALL_SHRINK over STALL_TIME) and is
+below `stall_gap` of the seams' particle spacing also counts as closed: the merge then moves each partner by at
+most an eighth of a spacing by default, where the pull would move it no further. Then the pairs are joined: merged into one
 particle each (default; Chen 2013's alternative, a very stiff short spring, is join = "spring"), the seam edges
 get bend springs across them, gravity comes back on if it was off while sewing, and the drape continues.
 """
@@ -39,7 +44,9 @@ class SewingOptions:
     elastic energy over one frame when sewing stops; gravity: gravity on while sewing; join: "merge" (pairs
     become one particle), "spring" (a stiff zero-length spring of join_stiffness [N/m], default 10 x the seam
     stiffness) or "none" (leave the seam springs as they are); max_time [s]: give up sewing after this much
-    simulated time (the open seams are reported)."""
+    simulated time (the open seams are reported); stall_gap: a seam whose largest gap has stopped shrinking counts
+    as closed below this fraction of the seams' particle spacing (the median distance between neighbouring pairs'
+    particles as placed)."""
 
     close_speed: float = 0.5
     max_force: float = 5.0
@@ -49,9 +56,10 @@ class SewingOptions:
     join: str = "merge"
     join_stiffness: float | None = None
     max_time: float = 10.0
+    stall_gap: float = 0.25
 
     def __post_init__(self):
-        for name in ("close_speed", "max_force", "epsilon", "energy_tolerance", "max_time"):
+        for name in ("close_speed", "max_force", "epsilon", "energy_tolerance", "max_time", "stall_gap"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and np.isfinite(v) and v > 0):
                 raise ValueError(f"sewing {name} must be a positive number, got {v!r}")
@@ -74,7 +82,7 @@ class SeamGap:
 class Sewing(Controller):
     """Closes the seams of a scene whose cloth is a GarmentCloth (a controller; one kernel, compiled once).
 
-    model, state, forces: the scene's; garment: the GarmentCloth; options: SewingOptions; levels: for a garment run
+    model, state, forces, contacts: the scene's (contacts None without colliders); garment: the GarmentCloth; options: SewingOptions; levels: for a garment run
     coarse to fine, its MultilevelGarment (taichi_cloth.garment.levels): `garment` is then its start level's, and
     after a level switch `garment` and `current_of` are the new level's (the seam gaps, the recording and the
     quality table follow the level).
@@ -86,9 +94,12 @@ class Sewing(Controller):
     """
 
     name = "sewing"
+    #: a seam has stalled when its largest gap shrank by less than this fraction over the last STALL_TIME [s]
+    STALL_SHRINK = 0.05
+    STALL_TIME = 0.1
 
-    def __init__(self, model, state, forces, garment, options: SewingOptions, levels=None):
-        self.model, self.state, self.forces = model, state, forces
+    def __init__(self, model, state, forces, contacts, garment, options: SewingOptions, levels=None):
+        self.model, self.state, self.forces, self.contacts = model, state, forces, contacts
         self.x = state.x  # the kernel reads this field
         self.garment, self.options, self.levels = garment, options, levels
         if levels is not None and options.join != "merge":
@@ -107,6 +118,8 @@ class Sewing(Controller):
     def _start(self) -> None:
         if self.levels is not None:
             self.garment = self.levels.garment
+        self.stall_gap = self.options.stall_gap * seam_spacing(self.garment)  # [m]
+        self._sewing_from = len(self.history)  # the history of this sewing (a reset starts another)
         self.active = self.count > 0
         self.current_of = np.arange(self.garment.data.n_particles, dtype=np.int64)
         self.closed_at = None
@@ -122,8 +135,8 @@ class Sewing(Controller):
     def _body_friction(self, on: bool) -> None:
         """Friction against the colliders in the implicit step: off while sewing, so that the seams pull the pieces
         over the body into place (with it the T-shirt's seams held 2.4 mm apart against the 2 mm to join)."""
-        if self.state.contacts is not None:
-            self.state.contacts.friction_scale[None] = 1.0 if on else 0.0
+        if self.contacts is not None:
+            self.contacts.friction_scale[None] = 1.0 if on else 0.0
 
     def reset(self) -> ModelChange:
         """Back to the pieces as placed, apart, gravity off while sewing: the model is refilled with the garment
@@ -187,9 +200,11 @@ class Sewing(Controller):
         previous, self._energy = self._energy, m.elastic
         settled = previous is not None and abs(m.elastic - previous) <= self.options.energy_tolerance * max(
             abs(m.elastic), self.energy_floor)
-        if len(g) and g.max() < self.options.epsilon and settled:
+        largest = float(g.max()) if len(g) else 0.0
+        stalled = largest < self.stall_gap and self._stalled(frame.t, largest)
+        if len(g) and (largest < self.options.epsilon or stalled) and settled:
             self.closed_at = frame.t
-            return self._join(frame, float(g.max()))
+            return self._join(frame, largest, stalled=largest >= self.options.epsilon)
         if frame.t >= self.options.max_time:
             self.gave_up = True
             self.active = False
@@ -201,8 +216,14 @@ class Sewing(Controller):
                                        f"{1e3 * self.options.epsilon:g} mm); the seam springs stay")
         return None
 
+    def _stalled(self, t: float, largest: float) -> bool:
+        """Whether the largest gap [m] shrank by less than STALL_SHRINK of itself since STALL_TIME ago (False
+        before sewing has run that long)."""
+        past = [h.max for h in self.history[self._sewing_from:] if h.t <= t - self.STALL_TIME + 1e-9]
+        return bool(past) and largest >= (1.0 - self.STALL_SHRINK) * past[-1]
+
     # ------------------------------------------------------------------ joining
-    def _join(self, frame: FrameInfo, gap: float) -> ModelChange:
+    def _join(self, frame: FrameInfo, gap: float, stalled: bool = False) -> ModelChange:
         self.wall = time.perf_counter() - self._wall0 if self._wall0 is not None else 0.0
         self.active = False
         self.joined = True
@@ -221,8 +242,10 @@ class Sewing(Controller):
         elif join == "merge":
             data, x, v, self.current_of = merge_seams(data, self.garment, x, v)
         what = {"merge": "pairs merged", "spring": "pairs joined by stiff springs", "none": "seam springs kept"}[join]
+        how = (f"stalled at a largest gap of {1e3 * gap:.2f} mm, below {self.options.stall_gap:g} of the seam spacing"
+               if stalled else f"largest gap {1e3 * gap:.2f} mm")
         event = (f"seams closed at t = {self.closed_at:.3f} s after {frame.steps} steps and {self.wall:.2f} s of wall "
-                 f"time, compiles included (largest gap {1e3 * gap:.2f} mm): {what}; {data.n_particles} particles now")
+                 f"time, compiles included ({how}): {what}; {data.n_particles} particles now")
         if join == "none":
             return ModelChange(event=event)
         # merged on a garment's levels, the model is its start level (the numbering is the same merge's)
@@ -247,6 +270,18 @@ class Sewing(Controller):
         if self.active:  # the seams as lines between their pairs, while they close: one entity, one call a frame
             p = self.current_of[g.seam_pairs]
             frame.segments["seams"] = np.stack([frame.positions[p[:, 0]], frame.positions[p[:, 1]]], 1)
+
+
+def seam_spacing(garment) -> float:
+    """The seams' particle spacing [m]: the median distance between the same side's particles of neighbouring seam
+    pairs, as placed (0 for a garment without seams)."""
+    pairs, seam = garment.seam_pairs, garment.seam_of_pair
+    if len(pairs) < 2:
+        return 0.0
+    x = garment.data.positions
+    same = seam[1:] == seam[:-1]
+    steps = np.linalg.norm(x[pairs[1:]] - x[pairs[:-1]], axis=2)[same]
+    return float(np.median(steps)) if len(steps) else 0.0
 
 
 def merge_seams(data: ClothData, garment, x: np.ndarray, v: np.ndarray):

@@ -1,10 +1,13 @@
-"""The one small contract every integrator honours: `step(dt)` advances state by dt seconds."""
+"""The one small contract every integrator honours: `step(state, contacts, dt)` advances the state by dt seconds,
+with the contacts the collision stage left (taichi_cloth.colliders)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
 from typing import Any, Callable, ClassVar
 
 import taichi as ti
+
+from ..contacts import require_bound
 
 
 @dataclass(frozen=True)
@@ -48,7 +51,7 @@ class Integrator:
     #: measurement adds half a step of acceleration to read the velocity at the positions' time (the explicit family)
     staggered_velocity: ClassVar[bool] = False
 
-    def __init__(self, model, state, forces, **options):
+    def __init__(self, model, state, forces, contacts=None, **options):
         self.model, self.state, self.forces = model, state, forces
         unknown = set(options) - set(self.OPTIONS)
         if unknown:
@@ -62,8 +65,8 @@ class Integrator:
             self.options[k] = v
         #: cumulative counters worth reporting (e.g. CG iterations); a run reports their mean per step
         self.stats: dict[str, float] = {}
-        self.contacts = state.contacts
-        self.has_contacts = state.contacts is not None  # compile-time: no colliders, no contact code
+        self.contacts = contacts  # a Contacts (taichi_cloth.contacts) when the scene has colliders
+        self.has_contacts = contacts is not None  # compile-time: no colliders, no contact code
 
     @ti.func
     def contact_filter(self, i, vec):
@@ -74,11 +77,14 @@ class Integrator:
             out = self.contacts.filter(i, vec)
         return out
 
-    def step(self, dt: float) -> None:
-        """Advance the state by dt [s]: forces are prepared for time t, then the scheme's own update."""
-        self.forces.prepare(self.state.t)
+    def step(self, state, contacts, dt: float) -> None:
+        """Advance `state` (a State) by dt [s] with `contacts` (the Contacts of the last collision stage, or None
+        without colliders): forces are prepared for time t, then the scheme's own update. They must be the state
+        and contacts this integrator was built for (its kernels bind their fields): another raises ValueError."""
+        require_bound(self, state, contacts)
+        self.forces.prepare(state.t)
         self._advance(dt)
-        self.state.t += dt
+        state.t += dt
 
     def _advance(self, dt: float) -> None:
         raise NotImplementedError
@@ -88,8 +94,9 @@ class Integrator:
         per-particle resolve of `colliders` inlined; the scene asks when its controllers change. False by default."""
         return False
 
-    def advance_fused(self, n: int, dt: float) -> None:
-        """n steps of dt [s] in few kernel launches (only after fuse() said yes)."""
+    def advance_fused(self, state, contacts, n: int, dt: float) -> None:
+        """n steps of dt [s] of `state` in few kernel launches (only after fuse() said yes); the state and contacts
+        as for step."""
         raise NotImplementedError
 
     def reset(self) -> None:

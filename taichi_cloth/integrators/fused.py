@@ -13,6 +13,7 @@ unfused ones do, in the same order (a test compares the trajectories).
 """
 import taichi as ti
 
+from ..contacts import require_bound
 from .base import Integrator, Option
 
 
@@ -77,7 +78,8 @@ class FusedSteps(Integrator):
         self.inline = colliders
         return True
 
-    def advance_fused(self, n: int, dt: float) -> None:
+    def advance_fused(self, state, contacts, n: int, dt: float) -> None:
+        require_bound(self, state, contacts)
         c = self._damping_factor(dt)
         first = int(not self._started)
         if self.model.serial:
@@ -93,7 +95,7 @@ class FusedSteps(Integrator):
                 self._parallel_steps(dt, c, 0, 1)
         self._started = self._started or n > 0
         for _ in range(n):  # as n single steps would add it
-            self.state.t += dt
+            state.t += dt
 
     @ti.kernel
     def _serial_steps(self, dt: ti.f64, c_: ti.f64, first: ti.i32, count: ti.i32):

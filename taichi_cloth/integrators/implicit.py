@@ -71,7 +71,7 @@ class Implicit(Integrator):
         super().__init__(model, state, forces, **options)
         fp, P = model.fp, model.capacity[0]
         self.system = BlockSystem(model, state.x)     # A of the Newton iteration
-        self.filter = ConstraintFilter(model, state.contacts)
+        self.filter = ConstraintFilter(model, self.contacts)
         self.pcg = PCG(model)
         self.policy = PreconditionerPolicy(self.options["preconditioner"], model)
         self.b, self.dv = self.pcg.b, self.pcg.x      # the Newton system's right-hand side [kg m/s], its dv [m/s]

@@ -40,7 +40,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .hierarchy import Hierarchy48, Level, identity_tables
+from multilevel.hierarchy import Hierarchy48, Level, identity_tables
 
 MAX_LEVELS = 6
 DEFAULT_MARGIN = 0.5

@@ -14,6 +14,9 @@ from pathlib import Path
 
 import numpy as np
 
+from collision.distance import unsigned_distance
+from taichi_cloth.errors import BlowUpError
+
 #: the status of a run: finished, or stopped by the blow-up check (NaN, runaway speed or strain)
 OK, UNSTABLE = "ok", "unstable"
 
@@ -79,8 +82,6 @@ def run_sampled(scene, times, warm_up: bool = True, progress=None) -> Trajectory
     so an unstable configuration stops within a frame of going wrong. With `warm_up`, one step is taken first
     and the scene reset, so the kernels are compiled (or loaded) before the clock starts. `progress`, when
     given, is called with the simulated time after every frame."""
-    from ..errors import BlowUpError
-
     times = np.asarray(times, dtype=np.float64)
     if warm_up:
         try:
@@ -128,8 +129,6 @@ def surface_distance(xa: np.ndarray, tri_a: np.ndarray, xb: np.ndarray, tri_b: n
     """RMS and max [m] of the symmetric vertex-to-surface distance between two triangle meshes (positions
     (n,3) [m], triangles (t,3)): every vertex of each against the other's surface. Unlike a vertex distance it
     needs no common vertices and does not count cloth sliding along itself; exact up to `cutoff` [m]."""
-    from collision.distance import unsigned_distance
-
     d = np.r_[unsigned_distance(xa, xb[tri_b], cutoff), unsigned_distance(xb, xa[tri_a], cutoff)]
     return float(np.sqrt(np.mean(d ** 2))), float(d.max())
 

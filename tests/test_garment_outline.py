@@ -1,4 +1,5 @@
-"""Multilevel meshes of arbitrary pattern outlines (multilevel.outline; docs/algorithms.md, multilevel, "Arbitrary outlines").
+"""Multilevel meshes of arbitrary pattern outlines (taichi_cloth.garment.outline; docs/algorithms.md, multilevel,
+"Arbitrary outlines").
 
 Pure numpy: nothing here touches Taichi.
 """
@@ -6,7 +7,7 @@ import numpy as np
 import pytest
 
 from multilevel.hierarchy import Hierarchy48, edge_use, valences
-from multilevel.outline import OutlineHierarchy, OutlineLevel, outline_hierarchy
+from taichi_cloth.garment.outline import OutlineHierarchy, OutlineLevel, outline_hierarchy
 
 # smallest angle [deg] over all levels, as built: 24.8 (B-spline), 26.6 (L), 26.6 (trapezoid), 22.3 (dumbbell);
 # over 150 random shapes, sizes, shifts and rotations the worst was 16.9 (a piece only ~2 h_0 wide)

@@ -18,6 +18,15 @@ import statistics
 import time
 from pathlib import Path
 
+import taichi as ti
+
+from collision import MeshCollider
+from taichi_cloth import runtime
+from taichi_cloth.builder import ClothBuilder
+from taichi_cloth.colliders import body_mesh
+from taichi_cloth.integrators import ApproxImplicit
+from taichi_cloth.scene import Scene
+
 CELL_FACTORS = (0.75, 1.0, 1.5, 2.0, 3.0, 4.0)  # x the mannequin's mean edge
 
 
@@ -31,42 +40,30 @@ def add_arguments(p) -> None:
 
 
 def _record(n: int, settle: float, steps: int):
-    from ..builder import ClothBuilder
-    from ..colliders import body_mesh
-    from ..scene import Scene
-
     v, t = body_mesh("mannequin")
     cloth = ClothBuilder.grid((1.2, 1.2), (n, n), "silk", center=(0.0, 1.73, 0.06), plane="xz")
     scene = Scene(cloth, integrator="implicit", dt=1 / 120, air_damping=0.3, integrator_options={"cg_tolerance": 1e-2},
                   colliders=[{"type": "mesh", "path": "mannequin", "thickness": 0.004, "friction": 0.4}])
     scene.step(int(round(settle / scene.dt)))
-    body = scene.controller("colliders").objects[0]
     frames = []
     for _ in range(steps):
         x0 = scene.positions()
-        body.begin_step()
-        scene.integrator.step(scene.dt)  # the integrator alone: its end state is what collision must resolve
-        frames.append((x0, scene.positions(), scene.velocities()))
-        scene.state.contacts.clear()
-        body.resolve(scene.dt)
+        # the integrator's end state, before the collision stage, is what each replayed collider must resolve
+        scene.substep(scene.dt, observe=lambda x0=x0: frames.append((x0, scene.positions(), scene.velocities())))
     return scene, (v, t), frames
 
 
 def _time_integrator(scene, steps: int) -> float:
-    import taichi as ti
-
     per = []
     for _ in range(steps):
         t0 = time.perf_counter()
-        scene.integrator.step(scene.dt)
+        scene.integrator.step(scene.state, scene.contacts, scene.dt)
         ti.sync()
         per.append(1e3 * (time.perf_counter() - t0))
     return statistics.median(per)
 
 
 def _replay(collider, scene, frames) -> tuple[float, dict]:
-    import taichi as ti
-
     collider.attach(scene.state.x, scene.state.v, scene.model.inv_mass, scene.model.n_particles)
     collider.reset_counters()
     per = []
@@ -83,10 +80,6 @@ def _replay(collider, scene, frames) -> tuple[float, dict]:
 
 
 def run(args) -> int:
-    from collision import MeshCollider
-
-    from .. import runtime
-
     runtime.init(args.arch)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -96,11 +89,11 @@ def run(args) -> int:
         scene, (v, t), frames = _record(n, args.settle, args.steps)
         print(f"{n}x{n}: recorded {len(frames)} steps after {args.settle} s ({time.perf_counter() - t0:.0f} s)", flush=True)
         implicit_ms = _time_integrator(scene, 4)
-        from ..integrators import ApproxImplicit
 
-        approx = ApproxImplicit(scene.model, scene.state, scene.forces)
-        approx.step(scene.dt)
-        approx_ms = statistics.median([_timed(lambda: approx.step(scene.dt)) for _ in range(8)])
+        approx = ApproxImplicit(scene.model, scene.state, scene.forces, contacts=scene.contacts)
+        approx.step(scene.state, scene.contacts, scene.dt)
+        approx_ms = statistics.median([_timed(lambda: approx.step(scene.state, scene.contacts, scene.dt))
+                                       for _ in range(8)])
         mean_edge = scene.controller("colliders").objects[0].mean_edge
         for factor in args.cells:
             for mode, gate in (("fuzzy", True), ("exact", True), ("fuzzy", False)):
@@ -124,8 +117,6 @@ def run(args) -> int:
 
 
 def _timed(fn) -> float:
-    import taichi as ti
-
     t0 = time.perf_counter()
     fn()
     ti.sync()

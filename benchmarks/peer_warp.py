@@ -27,6 +27,8 @@ from __future__ import annotations
 import contextlib
 import functools
 import hashlib
+import importlib
+import importlib.util
 import io
 import pickle
 import time
@@ -56,8 +58,6 @@ def warp_status() -> tuple[str | None, str | None]:
     except ImportError:
         return (f"warp-lang is not installed ({INSTALL_HINT})",) * 2
     try:
-        import importlib.util
-
         if importlib.util.find_spec("warp.sim") is None:
             raise ImportError
     except ImportError:
@@ -145,7 +145,6 @@ class ShippedExample:
             raise ValueError(f"warp example integrator must be one of {', '.join(EXAMPLE_INTEGRATORS)}, "
                              f"got {integrator!r}")
         wp = warp_module()
-        import importlib
 
         mod = importlib.import_module("warp.examples.sim.example_cloth")
         t0 = time.perf_counter()

@@ -14,8 +14,23 @@ bench.csv, bench.md and bench.png in --out. Never asserted in tests: speed is me
 from __future__ import annotations
 
 import csv
+import re
+import statistics
 import time
 from pathlib import Path
+
+import taichi as ti
+from taichi.lang import impl
+
+from taichi_cloth import runtime
+from taichi_cloth.builder import ClothBuilder
+from taichi_cloth.errors import BlowUpError
+from taichi_cloth.frame import scene_layout, scene_snapshot
+from taichi_cloth.integrators import INTEGRATORS
+from taichi_cloth.integrators.implicit import Implicit
+from taichi_cloth.multilevel_cloth import multilevel_grid
+from taichi_cloth.scene import Scene
+from taichi_cloth.scenefile import load_scene
 
 FRAME_DT = 1.0 / 60.0
 #: the garment timed by default: the T-shirt demo's scene, where the project's demos are beside the package
@@ -42,9 +57,6 @@ def add_arguments(p) -> None:
 def hanging_cloth(n: int, integrator: str, material: str = "cotton", dt: float | None = None, **options):
     """The benchmark scene: a 1 m square sheet of n x n particles pinned at its two top corners. dt [s] defaults
     to 1/60 s for the unconditionally stable integrators and 0.9 x the stable bound for the explicit ones."""
-    from ..builder import ClothBuilder
-    from ..scene import Scene
-
     cloth = ClothBuilder.grid((1.0, 1.0), (n, n), material, center=(0.0, 1.0, 0.0), plane="xy")
     top = [n * (n - 1), n * n - 1]
     scene = Scene(cloth, name=f"bench_{integrator}_{n}", integrator=integrator, dt=dt or FRAME_DT,
@@ -57,8 +69,6 @@ def hanging_cloth(n: int, integrator: str, material: str = "cotton", dt: float |
 def multigrid_cloth(n: int, material: str = "cotton"):
     """The benchmark sheet as a 4-8 hierarchy on its finest level, (n+1) x (n+1) particles, for the implicit
     integrator's multigrid preconditioner; None unless n = b x 2^j cells, b in 2, 3, 4, 8 and j >= 1."""
-    from ..multilevel_cloth import multilevel_grid
-
     for base in (4, 3, 2, 8):  # 8 x 2^5 = 256 cells: 4 x 2^6 would need 13 levels, one more than a hierarchy holds
         j = (n // base).bit_length() - 1
         if n % base == 0 and n // base == 1 << j and 2 * j + 1 <= 12 and j >= 1:
@@ -69,8 +79,6 @@ def multigrid_cloth(n: int, material: str = "cotton"):
 
 def hanging_multigrid(n: int, material: str = "cotton"):
     """hanging_cloth's scene on multigrid_cloth(n) (pinned at its two top corners, h = 1/60 s), or None."""
-    from ..scene import Scene
-
     cloth = multigrid_cloth(n, material)
     if cloth is None:
         return None
@@ -83,12 +91,6 @@ def hanging_multigrid(n: int, material: str = "cotton"):
 def time_scene(scene, steps: int, blocks: int = 5) -> dict:
     """First-step time (compile or cache load), then the median over `blocks` blocks of `steps` steps of the
     ms per step, after 3 warm-up steps. The median resists the noise of a shared 2-core machine."""
-    import statistics
-
-    import taichi as ti
-
-    from ..errors import BlowUpError
-
     t0 = time.perf_counter()
     scene.advance(1)
     ti.sync()
@@ -115,15 +117,15 @@ def time_scene(scene, steps: int, blocks: int = 5) -> dict:
 
 def time_recorder(scene, out: Path, frames: int = 10) -> float:
     """ms per recorded frame (positions + normals + scalars) for this scene's cloth."""
-    from ..recorder import Recorder
+    from taichi_cloth.recorder import Recorder
 
     with Recorder(out / "recorder_timing.rrd", overwrite=True) as rec:
-        rec.begin_cloth("cloth", scene.layout())
+        rec.begin_cloth("cloth", scene_layout(scene))
         m = scene.measure()
-        rec.log_frame("cloth", scene.snapshot(0, m))
+        rec.log_frame("cloth", scene_snapshot(scene, 0, m))
         t0 = time.perf_counter()
         for f in range(1, frames + 1):
-            rec.log_frame("cloth", scene.snapshot(f, m))  # the snapshot (a copy out of the fields) is part of the cost
+            rec.log_frame("cloth", scene_snapshot(scene, f, m))  # the snapshot (a copy out of the fields) is part of the cost
         ms = 1e3 * (time.perf_counter() - t0) / frames
     (out / "recorder_timing.rrd").unlink(missing_ok=True)
     return ms
@@ -134,11 +136,6 @@ def kernel_shares(scene, steps: int) -> dict:
     with kernel_profiler=True. Launch and host time is not in it: the profiler itself adds per-task overhead on the
     CPU (a fused explicit step at 64x64 took 20 ms per step under it, 0.27 without), so compare the kernels' sum
     with the plain bench's ms per step to see the launch and host share."""
-    import re
-
-    import taichi as ti
-    from taichi.lang import impl
-
     scene.advance(4)
     ti.sync()
     ti.profiler.clear_kernel_profiler_info()
@@ -179,9 +176,6 @@ def garment_scene(path, preconditioner: str, frames: int = 90):
     """The garment scene file at `path` with the implicit integrator, `preconditioner` and CG to the integrator's
     default tolerance (1e-3; the T-shirt demo's 1e-2 leaves its seams a few tenths of a millimetre short of joining
     with the aggregation multigrid), run for `frames` frames (the T-shirt's seams join after about 0.75 s)."""
-    from ..integrators.implicit import Implicit
-    from ..scenefile import load_scene
-
     tolerance = Implicit.OPTIONS["cg_tolerance"].default
     scene = load_scene(path, integrator="implicit",
                        integrator_options={"preconditioner": preconditioner, "cg_tolerance": tolerance}).scene
@@ -211,9 +205,6 @@ def _scenes(args, names):
 
 
 def run(args) -> int:
-    from .. import runtime
-    from ..integrators import INTEGRATORS
-
     runtime.init(args.arch, kernel_profiler=args.kernel_shares)
     names = args.integrators or list(INTEGRATORS)
     out = Path(args.out)

@@ -1,6 +1,6 @@
 """Stability envelope: stable, unstable or refused over stiffness x time step x mass ratio, for every integrator.
 
-For each integrator and mass ratio, one probe scene (taichi_cloth.bench.probes.probe_scene: a 6x6 sheet, two corners
+For each integrator and mass ratio, one probe scene (taichi_cloth.stability_probes.probe_scene: a 6x6 sheet, two corners
 pinned, no gravity, a checkerboard of light and heavy particles, air drag 0.1 1/s, spring damping kd/k = 1e-6 s)
 is reused over the whole sweep: the stiffest spring is set to k through Model.set_stiffness and dt is passed,
 so each kernel compiles once. Every cell (k, dt) is a run of --n-steps steps from a random perturbation (1 mm,
@@ -28,6 +28,15 @@ import time
 from pathlib import Path
 
 import numpy as np
+
+from taichi_cloth import runtime
+from taichi_cloth.adaptive import AdaptiveOptions
+from taichi_cloth.adaptive import AdaptiveOptions, frame_steps, step_cap
+from taichi_cloth.errors import BlowUpError
+from taichi_cloth.integrators import INTEGRATORS
+from taichi_cloth.stability import omega_max_exact, stable_dt
+from taichi_cloth.stability_probes import critical_step, probe_scene, set_max_stiffness
+from taichi_cloth.stability_probes import probe_run
 
 DEFAULT_STIFFNESS = [1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7]
 DEFAULT_STEPS = [float(f"{10 ** (e / 2):.3g}") for e in range(-10, -1)]  # 1e-5, 3.16e-5, ..., 1e-1
@@ -59,8 +68,6 @@ def add_arguments(p) -> None:
 
 
 def _check(args) -> str | None:
-    from ..integrators import INTEGRATORS
-
     for name in args.integrators or []:
         if name not in INTEGRATORS:
             return f"--integrators: {name!r} is not one of: {', '.join(INTEGRATORS)}"
@@ -78,9 +85,6 @@ def _check(args) -> str | None:
 
 def _outcome(scene, k: float, dt: float, rng, args) -> tuple[str, int | None, str]:
     """Run one cell: ("stable" | "unstable", step caught at or None, reason)."""
-    from ..errors import BlowUpError
-    from .probes import probe_run
-
     try:
         probe_run(scene, k, dt, rng, steps=args.n_steps, check_every=args.check_every)
         return "stable", None, ""
@@ -101,10 +105,6 @@ def _label(refused: bool, outcome: str) -> str:
 
 def map_integrator(name: str, ratio: float, args, rng) -> tuple[list[dict], list[dict]]:
     """(cells, bounds) of one integrator and mass ratio: a dict per (k, dt) cell and one per k."""
-    from ..adaptive import AdaptiveOptions, frame_steps, step_cap
-    from ..stability import omega_max_exact, stable_dt
-    from .probes import critical_step, probe_scene, set_max_stiffness
-
     scene = probe_scene(name, ratio)
     cls, air = type(scene.integrator), scene.forces.air_damping_value
     options = AdaptiveOptions() if args.safety is None else AdaptiveOptions(safety=args.safety)
@@ -140,9 +140,6 @@ def map_integrator(name: str, ratio: float, args, rng) -> tuple[list[dict], list
 
 
 def run(args) -> int:
-    from .. import runtime
-    from ..integrators import INTEGRATORS
-
     problem = _check(args)
     if problem:
         print(f"error: {problem}", file=sys.stderr)
@@ -165,7 +162,6 @@ def run(args) -> int:
                   + f"; auto step {'all stable' if all(r['auto_outcome'] == 'stable' for r in b) else 'NOT all stable'}"
                   f" ({time.perf_counter() - t0:.1f} s)", flush=True)
     wall = time.perf_counter() - t_start
-    from ..adaptive import AdaptiveOptions
 
     safety = AdaptiveOptions.safety if args.safety is None else args.safety
     text = markdown(cells, bounds, args, wall, safety)

@@ -42,6 +42,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+import taichi
+import taichi as ti
+
+from taichi_cloth import runtime
+from taichi_cloth.cloth import ClothData, SpringKind
+from taichi_cloth.scene import Scene
 
 from .accuracy import UNSTABLE, Trajectory
 
@@ -57,8 +63,6 @@ class ExampleUnavailable(RuntimeError):
 
 def example_path() -> Path:
     """Path of mass_spring_3d_ggui.py in the installed taichi package (it may not exist)."""
-    import taichi
-
     return Path(taichi.__file__).parent.joinpath(*EXAMPLE_RELPATH)
 
 
@@ -103,8 +107,6 @@ class TaichiExample:
               "ball_radius", "ball_center", "gravity", "spring_offsets")
 
     def __init__(self, n: int, dt: float):
-        from .. import runtime
-
         runtime.ensure_initialized()
         src = headless_source(n, dt)
         _LOADED[0] += 1
@@ -131,8 +133,6 @@ class TaichiExample:
 
     def advance(self, steps: int) -> None:
         """`steps` calls of the example's substep() (each one step of dt), then ti.sync()."""
-        import taichi as ti
-
         substep = self.ns["substep"]
         for _ in range(steps):
             substep()
@@ -212,8 +212,6 @@ class ExamplePhysics:
         """The example as ClothData: start `positions` (P,3) [m] (default start_positions()), rest lengths from
         the grid (not from the start, which may be deformed), k = spring_Y / L0, kd = dashpot_damping x
         quad_size, 1 kg particles, the example's triangles."""
-        from ..cloth import ClothData, SpringKind
-
         n, q = self.n, self.quad_size
         x = self.start_positions() if positions is None else np.asarray(positions, np.float64)
         springs, offs = self.springs()
@@ -238,8 +236,6 @@ class ExamplePhysics:
               positions: np.ndarray | None = None, ball: bool = True, name: str = "peers"):
         """Our Scene of the example: `integrator` at step dt [s], drag rate drag_damping as our linear
         air_damping, the ball as a sphere collider (unless ball=False), step guard off (the caller chooses)."""
-        from ..scene import Scene
-
         return Scene(self.cloth(positions), name=name, integrator=integrator, dt=dt,
                      integrator_options=dict(options or {}), gravity=self.gravity, air_damping=self.drag_damping,
                      colliders=[self.collider()] if ball else [], precision=precision, step_guard="off")

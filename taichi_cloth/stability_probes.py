@@ -10,11 +10,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..builder import ClothBuilder
-from ..errors import BlowUpError
-from ..material import Material
-from ..scene import Scene
-from ..stability import highest_mode
+from .builder import ClothBuilder
+from .errors import BlowUpError
+from .material import Material
+from .scene import Scene
+from .stability import highest_mode
 
 PROBE_AIR = 0.1    # [1/s] the probes' air drag: "a little damping"
 PROBE_BETA = 1e-6  # [s] the probes' stiffness-proportional spring damping kd / k

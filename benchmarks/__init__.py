@@ -1,0 +1,17 @@
+"""The benchmarks: speed and speed/accuracy measurements, printed as tables and plots (speed is never asserted in
+tests). The one home of benchmark code; it imports the engine, and the engine never imports it.
+
+Suites of `python -m taichi_cloth bench SUITE` (each with add_arguments(parser) and run(args) -> exit code):
+
+    integrators  ms per step and real-time factor of every integrator
+    collision    collision cost on the mannequin against the voxel size (collision_cost.py: the name `collision`
+                 would shadow the collision package for the scripts run from this folder)
+    tradeoff     error against cost of every integrator, step and 4-8 level; the quality presets
+    stability    the stability map over stiffness, step and mass ratio
+    peers        against Taichi's own mass-spring example and NVIDIA Warp (peer_taichi_example, peer_warp)
+
+accuracy: sampled runs and their distance to a reference, shared by tradeoff and peers.
+
+Standalone scripts (`.venv/bin/python benchmarks/NAME.py`): approx_implicit_variants, multigrid_solver,
+multilevel_garment, multilevel_pays, self_collision.
+"""
