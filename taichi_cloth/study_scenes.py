@@ -41,14 +41,12 @@ class StudyScene:
         opts = dict(options or {})
         cloth = multilevel_grid(self.size, (base, base), level + 1, self.material, center=self.center, plane="xz",
                                 start_level=level)
-        hierarchy = opts.get("multigrid_cycles", 0) > 0  # the multigrid solves over the levels below
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            return Scene(cloth if hierarchy else cloth.levels[level], name=self.name, integrator=integrator, dt=dt,
+            return Scene(cloth.levels[level], name=self.name, integrator=integrator, dt=dt,
                          integrator_options=dict(opts), air_damping=self.air_damping,
                          pins=[dict(p) for p in self.pins], colliders=[dict(c) for c in self.colliders],
-                         stretch_limit=self.stretch_limit, multilevel={"refine": "none"} if hierarchy else None,
-                         precision=precision, step_guard="off")
+                         stretch_limit=self.stretch_limit, precision=precision, step_guard="off")
 
 
 SCENES = {s.name: s for s in (
