@@ -12,6 +12,6 @@ Suites of `python -m taichi_cloth bench SUITE` (each with add_arguments(parser) 
 
 accuracy: sampled runs and their distance to a reference, shared by tradeoff and peers.
 
-Standalone scripts (`.venv/bin/python benchmarks/NAME.py`): approx_implicit_variants, multigrid_solver,
+Standalone scripts (`.venv/bin/python benchmarks/NAME.py`): approx_implicit_variants,
 multilevel_garment, multilevel_pays, self_collision.
 """

@@ -10,7 +10,7 @@ size); "vs ref" is the distance to the implicit finest-only rest shape (the accu
 edge, the sheet has one rest shape; held by two corners it folds, and fold patterns depend on the path, so
 two correct runs may differ by a few cm there.
 
-    python benchmarks/multilevel_pays.py [--integrators implicit approx-implicit approx-implicit-mg] [--base 8] [--levels 5]
+    python benchmarks/multilevel_pays.py [--integrators implicit approx-implicit] [--base 8] [--levels 5]
 
 Writes out/bench/multilevel_pays.csv and out/bench/multilevel_pays.png (the level against wall time).
 """
@@ -32,8 +32,7 @@ SETTLE = dict(max_speed=0.002, energy_change=1e-6, window=10, max_time=30.0)
 
 #: the integrators compared: name -> (integrator, options)
 VARIANTS = {"implicit": ("implicit", {"cg_tolerance": 1e-3}),
-            "approx-implicit": ("approx-implicit", {}),
-            "approx-implicit-mg": ("approx-implicit", {"multigrid_cycles": 2})}
+            "approx-implicit": ("approx-implicit", {})}
 
 
 PINS = {"edge": dict(box=((-0.6, 0.99, -0.51), (0.6, 1.01, -0.49))),

@@ -62,7 +62,6 @@ VARIANTS: dict[str, tuple[str, dict]] = {
     "approx-implicit": ("approx-implicit", {}),
     "approx-implicit jv": ("approx-implicit", {"jv_term": True}),
     "approx-implicit 8 sweeps": ("approx-implicit", {"sweeps": 8, "jv_term": True}),
-    "approx-implicit multigrid": ("approx-implicit", {"multigrid_cycles": 2}),
     "approx-implicit warm start": ("approx-implicit", {"warm_start": True}),
     "implicit": ("implicit", {"cg_tolerance": 1e-2}),
     "implicit cg 1e-4": ("implicit", {"cg_tolerance": 1e-4}),
@@ -129,13 +128,11 @@ COLUMNS = [("scene", "{}"), ("variant", "{}"), ("level", "{}"), ("particles", "{
 
 def configs(variants, levels, dts=DT_LADDER, fractions=BOUND_FRACTIONS, explicit_tried=EXPLICIT_TRIED) -> list[Config]:
     """The sweep: every variant at every level (0-based); the step ladder for the integrators without a step
-    limit, bound fractions and a few frame-sized steps for the explicit ones. Multigrid needs a coarser level."""
+    limit, bound fractions and a few frame-sized steps for the explicit ones."""
     out = []
     for level in levels:
         for v in variants:
             integrator, opts = VARIANTS[v]
-            if opts.get("multigrid_cycles") and level == 0:
-                continue
             if integrator_class(integrator).unconditionally_stable:
                 out += [Config(v, level, dt=h) for h in dts]
             else:
@@ -230,7 +227,7 @@ def run_study(scene_names, variants, levels_below=(0, 1, 2), base: int = 4, n_le
                 try:
                     integrator, opts = VARIANTS[cfg.variant]
                     scenes = {sk: spec.build(base, cfg.level, integrator, DT_LADDER[0], options=opts)}
-                except ValueError as err:  # a combination the engine refuses (approx-implicit multigrid + colliders)
+                except ValueError as err:  # a combination the engine refuses
                     scenes = {sk: err}
             scene = scenes[sk]
             if isinstance(scene, ValueError):
