@@ -1,5 +1,6 @@
-"""What the demo scripts share: the command line of a scene demo, and how a demo ends. Loading and running a
-scene file is taichi_cloth.run's (load_scene_file, run_scene_file), as for `python -m taichi_cloth run`.
+"""What the demo scripts share: the command line of a scene demo, and how a demo ends. A demo of one scene
+file runs it as `python -m taichi_cloth run` does (taichi_cloth.cli.run_scene_file); one that does more with the
+scene loads it with taichi_cloth.run.load_scene_file.
 
 Exit codes: 0 done, 2 bad input (one `error:` line), 3 the run blew up (its summary is printed; the recording made
 so far is kept).

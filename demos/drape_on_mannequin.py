@@ -7,7 +7,7 @@ Writes DIR/drape_on_mannequin.rrd (the body logged once) and the final mesh, and
 counters: triangle tests done by the fuzzy ranking against the candidates in the touched voxels.
 """
 from _common import SCENES, arguments, ends
-from taichi_cloth.run import run_scene_file
+from taichi_cloth.cli import run_scene_file
 
 
 def main(argv=None) -> int:

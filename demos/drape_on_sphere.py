@@ -6,7 +6,7 @@
 Writes DIR/drape_on_sphere.rrd (the ball and floor logged once) and the final mesh.
 """
 from _common import SCENES, arguments, ends
-from taichi_cloth.run import run_scene_file
+from taichi_cloth.cli import run_scene_file
 
 
 def main(argv=None) -> int:

@@ -6,7 +6,7 @@
 Writes DIR/hanging_cloth.rrd (open it with `rerun DIR/hanging_cloth.rrd`) and the final mesh as .obj/.ply.
 """
 from _common import SCENES, arguments, ends
-from taichi_cloth.run import run_scene_file
+from taichi_cloth.cli import run_scene_file
 
 
 def main(argv=None) -> int:

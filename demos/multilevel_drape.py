@@ -8,7 +8,7 @@ Writes DIR/multilevel_drape.rrd: the mesh topology changes at each level switch 
 metrics/cloth/level plots the level over time. Open it with `rerun DIR/multilevel_drape.rrd`.
 """
 from _common import SCENES, arguments, ends
-from taichi_cloth.run import run_scene_file
+from taichi_cloth.cli import run_scene_file
 
 
 def main(argv=None) -> int:

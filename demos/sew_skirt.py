@@ -5,7 +5,7 @@ and drape it; prints the run summary and the quality table, writes DIR/sew_skirt
            [--arch cpu|gpu]
 """
 from _common import SCENES, arguments, ends
-from taichi_cloth.run import run_scene_file
+from taichi_cloth.cli import run_scene_file
 
 
 def main(argv=None) -> int:

@@ -11,7 +11,7 @@ boundary-length error between the 2D pattern and the 3D drape, edge strain; seam
 equilibrium).
 """
 from _common import SCENES, arguments, ends
-from taichi_cloth.run import run_scene_file
+from taichi_cloth.cli import run_scene_file
 
 
 def main(argv=None) -> int:

@@ -47,11 +47,15 @@ def _step(text: str):
 
 
 def run_scene_file(scene_path, args, quiet: bool = False):
-    """`python -m taichi_cloth run`: taichi_cloth.run.run_scene_file (load with the CLI overrides in `args`, run,
-    record to OUT/NAME.rrd, export the final mesh beside it). Returns (summary, loaded scene)."""
+    """`python -m taichi_cloth run` and the scene demos: taichi_cloth.run.run_scene_file (load with the CLI
+    overrides in `args`, run, record to OUT/NAME.rrd, export the final mesh beside it), then the line that opens
+    the recording. Returns (summary, loaded scene)."""
     from .run import run_scene_file as run
 
-    return run(scene_path, args, quiet)
+    summary, loaded = run(scene_path, args, quiet)
+    if loaded.output["record"] and not quiet:
+        print(f"open the recording with:  {rerun_command()} {summary.outputs[0]}")
+    return summary, loaded
 
 
 def rerun_command() -> str:

@@ -2,7 +2,7 @@
 
 `load_scene_file` loads a scene file (path or dict) with the command line's overrides and checks the run's length;
 `run_scene_file` does that, runs it, records it to OUT/NAME.rrd, exports the final mesh beside it and prints the
-summary. Both read their overrides from an argparse.Namespace made by `taichi_cloth.cli.add_run_arguments` (out,
+summary (taichi_cloth.cli.run_scene_file, which the demos call, adds the line that opens the recording). Both read their overrides from an argparse.Namespace made by `taichi_cloth.cli.add_run_arguments` (out,
 frames, integrator, dt, arch, precision, quality, no_progress, yes, png, until_rest); an attribute it lacks counts
 as not given.
 """
@@ -41,7 +41,8 @@ def run_scene_file(source: str | Path | dict, args: argparse.Namespace, quiet: b
     """Load `source` as `load_scene_file` does, run its frames, record them to OUT/NAME.rrd when its [output]
     record is on (a garment's pattern included) and export the final mesh beside it when [output] mesh is
     on (NAME-2, NAME-3... when an earlier run's files are there: nothing is overwritten); --png adds the still
-    pictures. Prints the summary (and a garment's quality table) unless `quiet`.
+    pictures. Prints the summary (and a garment's quality table) unless `quiet`; the recording is the first of
+    the summary's outputs.
 
     Returns (summary, loaded scene). Raises SceneError/MeshError for bad input and BlowUpError (with .summary)
     when the run goes unstable; the recording made so far is kept, with the mesh of the last good state."""
@@ -87,8 +88,4 @@ def run_scene_file(source: str | Path | dict, args: argparse.Namespace, quiet: b
             from .garment.metrics import garment_quality
 
             print(garment_quality(scene).format())  # per piece: area, boundary and strain; seam gap, penetrations
-        if rec is not None:
-            from .cli import rerun_command
-
-            print(f"open the recording with:  {rerun_command()} {rec.path}")
     return summary, loaded
