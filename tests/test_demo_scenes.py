@@ -101,9 +101,11 @@ def test_a_dropped_sheet_lands_on_the_body_without_entering_it(name):
 
 @pytest.mark.parametrize("name", ["sew_skirt", "fit_skirt", "sew_top", "sew_tshirt", "sew_tshirt_multilevel"])
 def test_a_garment_is_pulled_together_around_the_body(name):
-    """Gravity is off while sewing: the seams close, the pieces stay outside the mannequin they start near."""
+    """Gravity is off while sewing: the seams close (their rest lengths shrink by close_speed x t = 3.3 cm in the 4
+    frames; the mean gap of every garment here followed by 2.9 cm), the pieces stay outside the mannequin they
+    start near."""
     summary, scene, x0 = run(name)
     sewing = scene.controller("sewing")
     before, after = sewing.gaps(x0), sewing.gaps()
-    assert after.mean() < before.mean() - 0.005
+    assert after.mean() < before.mean() - 0.02
     assert_on_the_bodies(scene, x0)
