@@ -25,8 +25,8 @@ FREE_FALL_RTOL = {"explicit": 1e-9, "verlet": 1e-9, "central-difference": 1e-9, 
 
 @pytest.fixture(scope="module", params=ALL)
 def free_sheet(request):
-    """One unpinned f64 cotton sheet without air drag (8 x 8 particles, 0.5 m) per integrator, shared by the tests that pin
-    nothing: a scene's cost here is compiling its kernels, and reset(), dt and gravity compile nothing."""
+    """One unpinned f64 cotton sheet without air drag (8 x 8 particles, 0.5 m) per integrator, shared by the tests
+    that pin nothing: a scene's cost here is compiling its kernels, and reset(), dt and gravity compile nothing."""
     return tc.Scene(sheet(), integrator=request.param, dt=1e-4, air_damping=0.0, precision="f64",
                     integrator_options=TIGHT_CG if request.param == "implicit" else None)
 
