@@ -2,9 +2,9 @@
 
 `load_scene_file` loads a scene file (path or dict) with the command line's overrides and checks the run's length;
 `run_scene_file` does that, runs it, records it to OUT/NAME.rrd, exports the final mesh beside it and prints the
-summary (taichi_cloth.cli.run_scene_file, which the demos call, adds the line that opens the recording). Both read their overrides from an argparse.Namespace made by `taichi_cloth.cli.add_run_arguments` (out,
-frames, integrator, dt, arch, precision, quality, no_progress, yes, png, until_rest); an attribute it lacks counts
-as not given.
+summary (taichi_cloth.cli.run_scene_file, which the demos call, adds the line that opens the recording). Both read
+their overrides from an argparse.Namespace made by `taichi_cloth.cli.add_run_arguments` (out, frames, integrator,
+dt, arch, precision, quality, no_progress, yes, png, until_rest); an attribute it lacks counts as not given.
 """
 from __future__ import annotations
 
@@ -32,7 +32,8 @@ def load_scene_file(source: str | Path | dict, args: argparse.Namespace,
                         out=getattr(args, "out", None), quality=getattr(args, "quality", None), base_dir=base_dir)
     if getattr(args, "until_rest", False):
         loaded.scene.stop_at_rest = True
-    check_run_length(loaded.scene, loaded.frames, confirmed=getattr(args, "yes", False), label=str(loaded.config["_label"]))
+    check_run_length(loaded.scene, loaded.frames, confirmed=getattr(args, "yes", False),
+                     label=str(loaded.config["_label"]))
     return loaded
 
 
