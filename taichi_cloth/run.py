@@ -13,9 +13,12 @@ from pathlib import Path
 
 from . import runtime
 from .errors import BlowUpError
+from .garment.metrics import garment_quality
 from .guards import check_run_length
 from .paths import free_stem
+from .pattern_view import log_scene_pattern
 from .scenefile import LoadedScene, load_scene, parse_scene
+from .still import write_pictures
 from .summary import RunSummary
 
 
@@ -57,8 +60,7 @@ def run_scene_file(source: str | Path | dict, args: argparse.Namespace, quiet: b
     stem = free_stem(out, loaded.name, suffixes)
     rec = None
     if loaded.output["record"]:
-        from .pattern_view import log_scene_pattern
-        from .recorder import Recorder
+        from .recorder import Recorder  # imports rerun: only when something records
 
         rec = Recorder(out / f"{stem}.rrd", recording_name=loaded.name, overwrite=True)
         log_scene_pattern(rec, scene)
@@ -80,13 +82,9 @@ def run_scene_file(source: str | Path | dict, args: argparse.Namespace, quiet: b
                 for suffix in (".obj", ".ply"):
                     summary.outputs.append(str(scene.export_mesh(out / f"{stem}{suffix}")))
             if png:
-                from .still import write_pictures
-
                 summary.outputs += [str(p) for p in write_pictures(scene, out / stem)]
     if not quiet:
         print(summary.format())
         if scene.controller("sewing") is not None:
-            from .garment.metrics import garment_quality
-
             print(garment_quality(scene).format())  # per piece: area, boundary and strain; seam gap, penetrations
     return summary, loaded
