@@ -101,9 +101,9 @@ CORNERS = dict(near=[[-0.5, 1, -0.5], [0.5, 1, -0.5]])
 EDGE = dict(box=((-0.6, 0.99, -0.51), (0.6, 1.01, -0.49)))
 
 
-def hanging(start_level=0, levels=4, pins=CORNERS, dt=1 / 120, **schedule):
+def hanging(start_level=0, levels=4, pins=CORNERS, **schedule):
     cloth = multilevel_grid((1.0, 1.0), (4, 4), levels, "cotton", center=(0, 1, 0), plane="xz", start_level=start_level)
-    return tc.Scene(cloth, integrator="implicit", dt=dt, precision="f64", air_damping=1.0, pins=[pins],
+    return tc.Scene(cloth, integrator="implicit", dt=1 / 120, precision="f64", air_damping=1.0, pins=[pins],
                     multilevel=schedule or None)
 
 
@@ -175,13 +175,11 @@ def test_coarse_to_fine_drape_ends_where_the_fine_drape_does():
     """A cloth held by one edge, released horizontally, swings down: refined from level 1 to level 4 as it
     settles, its rest shape is within 1 % of the cloth size of the same cloth run at level 4 from the start.
     (Held by two corners instead, the slack cloth folds, and fold patterns depend on the path: there the
-    two rest shapes may legitimately differ by several cm.) One step per frame (1/60 s): a rest shape does not
-    depend on the step, and the drapes settle in 670 and 470 frames instead of 870 and 570 at 1/120 s (6.4 mm
-    apart, 7.9 at 1/120 s)."""
+    two rest shapes may legitimately differ by several cm.)"""
     settle = dict(max_speed=0.003, energy_change=1e-6, window=10, max_time=20.0)
     finals = []
     for start in (0, 3):
-        sc = hanging(start_level=start, levels=4, pins=EDGE, dt=1 / 60, **settle)
+        sc = hanging(start_level=start, levels=4, pins=EDGE, **settle)
         frames = 0
         while not (sc.controller("refiner").at_finest and sc.controller("refiner").settled) and frames < 1500:
             sc.run(1, progress=False)
