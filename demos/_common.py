@@ -1,4 +1,6 @@
-"""What the demo scripts share: the command line of a scene demo, and how a demo ends.
+"""What the demo scripts share: the command line of a scene demo, and how a demo ends. A demo of one scene
+file runs it as `python -m taichi_cloth run` does (taichi_cloth.cli.run_scene_file); one that does more with the
+scene loads it with taichi_cloth.run.load_scene_file.
 
 Exit codes: 0 done, 2 bad input (one `error:` line), 3 the run blew up (its summary is printed; the recording made
 so far is kept).
@@ -9,13 +11,12 @@ from pathlib import Path
 
 import taichi_cloth as tc
 from taichi_cloth.cli import add_run_arguments, rerun_command
-from taichi_cloth.guards import check_run_length
 
 DEMOS = Path(__file__).resolve().parent
 SCENES = DEMOS / "scenes"
 GARMENTS = DEMOS / "garments"
 
-__all__ = ["DEMOS", "GARMENTS", "SCENES", "arguments", "ends", "load", "opened_with", "pictures"]
+__all__ = ["DEMOS", "GARMENTS", "SCENES", "arguments", "ends", "opened_with"]
 
 
 def arguments(doc: str, argv=None, extra=None) -> argparse.Namespace:
@@ -28,26 +29,6 @@ def arguments(doc: str, argv=None, extra=None) -> argparse.Namespace:
     args = parser.parse_args(argv)
     args.out = Path(args.out or "out")
     return args
-
-
-def load(scene_file, args):
-    """tc.load_scene with the demo's command-line overrides (--until-rest: the scene's runs end at rest)."""
-    loaded = tc.load_scene(scene_file, frames=args.frames, integrator=args.integrator, dt=args.dt,
-                           precision=args.precision, quality=args.quality, out=args.out)
-    if getattr(args, "until_rest", False):
-        loaded.scene.stop_at_rest = True
-    check_run_length(loaded.scene, loaded.frames, confirmed=getattr(args, "yes", False), label=str(scene_file))
-    return loaded
-
-
-def pictures(scene, recording, args) -> list:
-    """With --png: the still pictures of the run beside its recording (taichi_cloth.still.write_pictures: the
-    final drape, front and side, and a garment's pattern); their paths as str, for the summary's outputs."""
-    if not getattr(args, "png", False):
-        return []
-    from taichi_cloth.still import write_pictures
-
-    return [str(p) for p in write_pictures(scene, Path(recording).with_suffix(""))]
 
 
 def opened_with(path) -> str:

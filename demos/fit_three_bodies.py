@@ -16,9 +16,10 @@ import argparse
 import tomllib
 
 import taichi_cloth as tc
-from _common import GARMENTS, SCENES, arguments, ends, load, opened_with
+from _common import GARMENTS, SCENES, arguments, ends, opened_with
 from taichi_cloth.body import default_body
 from taichi_cloth.garment.metrics import garment_quality
+from taichi_cloth.run import load_scene_file
 
 #: girths [m] (tape measures) of the three bodies; the shipped mannequin measures waist 0.669, hips 0.955
 BODIES = {"small": {"waist": 0.62, "hips": 0.90}, "medium": {"waist": 0.67, "hips": 0.96},
@@ -28,7 +29,6 @@ SPACING = 0.9  # [m] between the bodies in the viewer
 
 def main(argv=None) -> int:
     args = arguments(__doc__, argv, extra=_options)
-    tc.init(args.arch)
     scene_file = tomllib.loads((SCENES / "sew_skirt.toml").read_text(encoding="utf-8"))
     scene_file["cloth"]["garment"] = str(GARMENTS / "skirt.toml")
     if args.morph == "during":
@@ -44,7 +44,7 @@ def main(argv=None) -> int:
     with tc.Recorder(args.out / "fit_three_bodies.rrd", recording_name="fit_three_bodies") as rec:
         for k, (size, girths) in enumerate(BODIES.items()):
             print(f"--- {size} body: " + ", ".join(f"{g} {100 * v:.0f} cm" for g, v in girths.items()))
-            loaded = load(dict(scene_file, name=f"skirt_{size}", body=dict(girths, morph=args.morph)), args)
+            loaded = load_scene_file(dict(scene_file, name=f"skirt_{size}", body=dict(girths, morph=args.morph)), args)
             scene = loaded.scene
             summary = scene.run(loaded.frames, recorder=rec, entity=size, translation=((k - 1) * SPACING, 0.0, 0.0),
                                 progress=not args.no_progress)

@@ -14,9 +14,10 @@ import meshio
 import numpy as np
 
 import taichi_cloth as tc
-from _common import SCENES, arguments, ends, load, opened_with
+from _common import SCENES, arguments, ends, opened_with
 from taichi_cloth.flatten import flatten_pieces, plot_flat, write_flat_dxf
 from taichi_cloth.garment.metrics import draped_pieces, garment_quality
+from taichi_cloth.run import load_scene_file
 
 #: Fan et al. 1998 table 1, 3D -> 2D, per piece of a six-piece child's garment [%]
 PAPER_AREA = (0.025, 1.18)
@@ -25,8 +26,7 @@ PAPER_BOUNDARY = (0.756, 1.72)
 
 def main(argv=None) -> int:
     args = arguments(__doc__, argv)
-    tc.init(args.arch)
-    loaded = load(SCENES / "sew_tshirt.toml", args)
+    loaded = load_scene_file(SCENES / "sew_tshirt.toml", args)
     scene = loaded.scene
     with tc.Recorder(args.out / "flatten_draped.rrd", recording_name="flatten_draped") as rec:
         summary = scene.run(loaded.frames, recorder=rec, entity="tshirt", progress=not args.no_progress)

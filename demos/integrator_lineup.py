@@ -23,6 +23,7 @@ def main(argv=None) -> int:
     import taichi_cloth as tc
     from taichi_cloth.cli import rerun_command
     from taichi_cloth.integrators import INTEGRATORS
+    from taichi_cloth.run import load_scene_file
 
     p = argparse.ArgumentParser(description=__doc__.strip().splitlines()[0])
     p.add_argument("--out", default="out")
@@ -33,17 +34,14 @@ def main(argv=None) -> int:
     p.add_argument("--no-progress", action="store_true")
     args = p.parse_args(argv)
     try:
-        from taichi_cloth.scenefile import parse_scene
-
-        parse_scene(SCENE)
-        tc.init(args.arch)
         out = Path(args.out)
         rows, finals = [], {}
         with tc.Recorder(out / "integrator_lineup.rrd", recording_name="integrator line-up") as rec:
             for k, name in enumerate(args.integrator):
                 cls = INTEGRATORS[name]
-                loaded = tc.load_scene(SCENE, integrator=name, frames=args.frames,
-                                       dt=args.dt if cls.unconditionally_stable else None)
+                overrides = argparse.Namespace(integrator=name, frames=args.frames, arch=args.arch,
+                                               dt=args.dt if cls.unconditionally_stable else None)
+                loaded = load_scene_file(SCENE, overrides)
                 scene = loaded.scene
                 if scene.stable_dt is not None:
                     scene.dt = 0.9 * scene.stable_dt

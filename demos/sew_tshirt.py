@@ -10,26 +10,12 @@ seams merge) and the final mesh as .obj/.ply; prints the run summary and the qua
 boundary-length error between the 2D pattern and the 3D drape, edge strain; seam gap, body penetrations, static
 equilibrium).
 """
-import taichi_cloth as tc
-from _common import SCENES, arguments, ends, load, opened_with, pictures
-from taichi_cloth.garment.metrics import garment_quality
-from taichi_cloth.pattern_view import log_scene_pattern
+from _common import SCENES, arguments, ends
+from taichi_cloth.cli import run_scene_file
 
 
 def main(argv=None) -> int:
-    args = arguments(__doc__, argv)
-    tc.init(args.arch)
-    loaded = load(SCENES / "sew_tshirt.toml", args)
-    scene = loaded.scene
-    # the recording is closed, and kept, also when the run blows up
-    with tc.Recorder(args.out / "sew_tshirt.rrd", recording_name="sew_tshirt") as rec:
-        log_scene_pattern(rec, scene)  # the pattern's seam set-up, a 2D view under pattern/
-        summary = scene.run(loaded.frames, recorder=rec, progress=not args.no_progress)
-    summary.outputs += [str(rec.path)] + [str(scene.export_mesh(rec.path.with_suffix(s))) for s in (".obj", ".ply")]
-    summary.outputs += pictures(scene, rec.path, args)  # --png: the final drape (and the pattern) as PNGs
-    print(summary.format())
-    print(garment_quality(scene).format())  # per piece: area, boundary and strain; seam gap, penetrations
-    print(opened_with(rec.path))
+    run_scene_file(SCENES / "sew_tshirt.toml", arguments(__doc__, argv))
     return 0
 
 

@@ -59,64 +59,14 @@ def _step(text: str):
 
 
 def run_scene_file(scene_path, args, quiet: bool = False):
-    """Load `scene_path` with the CLI overrides in `args`, run it, record it to OUT/NAME.rrd and export the final
-    mesh beside it (NAME-2, NAME-3... when an earlier run's files are there: nothing is overwritten).
+    """`python -m taichi_cloth run` and the scene demos: taichi_cloth.run.run_scene_file (load with the CLI
+    overrides in `args`, run, record to OUT/NAME.rrd, export the final mesh beside it), then the line that opens
+    the recording. Returns (summary, loaded scene)."""
+    from .run import run_scene_file as run
 
-    Returns (summary, loaded scene). Raises SceneError/MeshError for bad input and BlowUpError (with .summary)
-    when the run goes unstable; the recording made so far is kept."""
-    from . import runtime
-    from .scenefile import load_scene, parse_scene
-
-    parse_scene(scene_path)  # bad files fail here, before Taichi starts
-    runtime.init(args.arch)
-    loaded = load_scene(scene_path, frames=args.frames, integrator=args.integrator, dt=args.dt,
-                        precision=getattr(args, "precision", None), out=args.out,
-                        quality=getattr(args, "quality", None))
-    scene, out = loaded.scene, Path(loaded.output["dir"])
-    if loaded.config.get("_quality") is not None and not quiet:
-        print(loaded.config["_quality"].describe())
-    check_run_length(scene, loaded.frames, confirmed=getattr(args, "yes", False), label=str(scene_path))
-    suffixes = ([".rrd"] if loaded.output["record"] else []) + ([".obj", ".ply"] if loaded.output["mesh"] else []) \
-        + ([".png", "-pattern.png"] if getattr(args, "png", False) else [])
-    stem = free_stem(out, loaded.name, suffixes)
-    rec = None
-    if loaded.output["record"]:
-        from .recorder import Recorder
-
-        from .pattern_view import log_scene_pattern
-
-        rec = Recorder(out / f"{stem}.rrd", recording_name=loaded.name, overwrite=True)
-        log_scene_pattern(rec, scene)
-    summary = None
-    try:
-        summary = scene.run(loaded.frames, recorder=rec, progress=not getattr(args, "no_progress", False),
-                            record_every=loaded.output["record_every"],
-                            until_rest=True if getattr(args, "until_rest", False) else None)
-    except BlowUpError as err:
-        summary = getattr(err, "summary", None)
-        raise
-    finally:
-        if rec is not None:
-            rec.close()
-        if summary is not None:
-            if rec is not None:
-                summary.outputs.append(str(rec.path))
-            if loaded.output["mesh"]:
-                out.mkdir(parents=True, exist_ok=True)
-                for suffix in (".obj", ".ply"):
-                    summary.outputs.append(str(scene.export_mesh(out / f"{stem}{suffix}")))
-            if getattr(args, "png", False):
-                from .still import write_pictures
-
-                summary.outputs += [str(p) for p in write_pictures(scene, out / stem)]
-    if not quiet:
-        print(summary.format())
-        if scene.controller("sewing") is not None:
-            from .garment.metrics import garment_quality
-
-            print(garment_quality(scene).format())
-        if rec is not None:
-            print(f"open the recording with:  {rerun_command()} {rec.path}")
+    summary, loaded = run(scene_path, args, quiet)
+    if loaded.output["record"] and not quiet:
+        print(f"open the recording with:  {rerun_command()} {summary.outputs[0]}")
     return summary, loaded
 
 

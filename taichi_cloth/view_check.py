@@ -148,8 +148,8 @@ def screenshot(browser, url: str, png: Path) -> PanelCheck:
 def run_demo(name: str, out: Path) -> Path:
     """Run demos/<name>.py into `out` (its recording overwritten); returns the recording's path."""
     rrd = out / f"{name}.rrd"
-    for old in out.glob(f"{name}*.rrd"):
-        old.unlink()
+    for old in [p for suffix in (".rrd", ".obj", ".ply") for p in out.glob(f"{name}*{suffix}")]:
+        old.unlink()  # the run numbers its files past any recording or mesh of an earlier run
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
     done = subprocess.run([sys.executable, str(DEMOS / f"{name}.py"), "--out", str(out), "--no-progress"],
                           capture_output=True, text=True, env=env)

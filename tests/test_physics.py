@@ -15,33 +15,43 @@ def sheet(n=8, size=0.5, material="cotton", plane="xz", center=(0.0, 1.0, 0.0)):
     return tc.ClothBuilder.grid((size, size), (n, n), material, center=center, plane=plane)
 
 
-@pytest.mark.parametrize("integrator", ["explicit", "verlet", "central-difference", "implicit"])
-def test_free_fall_matches_g_t2_over_2(integrator):
+#: relative tolerance of each integrator's free fall: the exact schemes to round-off of f64 over 30-50 steps;
+#: approx-implicit's filter factor 1 - r^2 is computed from the mean r, which differs between particles by 6e-7 of
+#: itself (the boundary's stiffness sums and masses are proportional only to that), 1 - r^2 = 0.0017 amplifying it
+#: to 3.4e-6 (measured)
+FREE_FALL_RTOL = {"explicit": 1e-9, "verlet": 1e-9, "central-difference": 1e-9, "approx-implicit": 2e-5,
+                  "implicit": 1e-9}
+
+
+@pytest.fixture(scope="module", params=ALL)
+def free_sheet(request):
+    """One unpinned f64 cotton sheet without air drag (8 x 8 particles, 0.5 m) per integrator, shared by the tests
+    that pin nothing: a scene's cost here is compiling its kernels, and reset(), dt and gravity compile nothing."""
+    return tc.Scene(sheet(), integrator=request.param, dt=1e-4, air_damping=0.0, precision="f64",
+                    integrator_options=TIGHT_CG if request.param == "implicit" else None)
+
+
+def test_free_fall_matches_g_t2_over_2(free_sheet):
     """An unpinned sheet with no drag falls as g t^2/2; the one-step-lagged schemes (symplectic and backward
-    Euler) carry the known O(h) offset g h t / 2, the two-level schemes are exact for constant acceleration."""
+    Euler) carry the known O(h) offset g h t / 2, the two-level schemes are exact for constant acceleration.
+    approx-implicit is symplectic Euler behind Hsiao 2006 eq. (2)'s filter: every step's velocity change is
+    h g (1 - r^2), r = h^2 K / (m + h^2 K), so it falls (1 - r^2) as far (0.17 % at h = 0.01 s on cotton)."""
+    sc, integrator = free_sheet, free_sheet.integrator.name
     dt = 1e-4 if integrator in EXPLICIT else 1e-2
-    sc = tc.Scene(sheet(), integrator=integrator, dt=dt, air_damping=0.0, precision="f64",
-                  integrator_options=TIGHT_CG if integrator == "implicit" else None)
+    sc.reset()
+    sc.dt = dt
+    sc.forces.set_gravity((0.0, -G, 0.0))
     y0 = sc.positions()[:, 1].copy()
     steps = 50 if integrator in EXPLICIT else 30
     sc.step(steps)
     t = sc.state.t
     drop = y0 - sc.positions()[:, 1]
-    lag = 0.5 * G * dt * t if integrator in ("explicit", "implicit") else 0.0
-    np.testing.assert_allclose(drop, 0.5 * G * t * t + lag, rtol=1e-9, atol=1e-12)
-
-
-def test_approx_implicit_first_step_is_the_published_formula():
-    """Hsiao 2006 eq. (2) for a uniform field: an interior particle whose neighbours all have its K and m gets
-    dv = h g (1 - r^2), r = h^2 K / (m + h^2 K), exactly."""
-    n, dt = 16, 1.0 / 120
-    sc = tc.Scene(sheet(n, 1.0), integrator="approx-implicit", dt=dt, air_damping=0.0, precision="f64")
-    i = n // 2 + n * (n // 2)
-    K = sc.model.stiffness_sum_np()[i]
-    m = sc.model.data.mass[i]
-    r = dt * dt * K / (m + dt * dt * K)
-    sc.step(1)
-    assert sc.velocities()[i, 1] == pytest.approx(-G * dt * (1 - r * r), rel=1e-12)
+    lag = 0.5 * G * dt * t if integrator in ("explicit", "approx-implicit", "implicit") else 0.0
+    filtered = 1.0
+    if integrator == "approx-implicit":
+        K, m = sc.model.stiffness_sum_np(), sc.model.data.mass
+        filtered = 1 - (dt * dt * K / (m + dt * dt * K)).mean() ** 2
+    np.testing.assert_allclose(drop, filtered * (0.5 * G * t * t + lag), rtol=FREE_FALL_RTOL[integrator], atol=1e-12)
 
 
 @pytest.mark.slow
@@ -101,6 +111,33 @@ def test_undamped_explicit_conserves_energy(integrator):
     assert swing > 0.05  # J: it really moved
     drift = max(abs(e - e0) for e in energies)
     assert drift < 1e-6 * swing
+
+
+#: how far [m] the mean height of the swinging sheet below falls in 3 s, at least: every scheme but approx-implicit
+#: brings it to hang 0.200 m below the start (measured); approx-implicit's filter holds the stiff sheet back at
+#: h = 0.01 s (its free fall is 1 - r^2 = 0.17 % of g's: 0.040 m measured)
+SWUNG_DOWN = {"explicit": 0.15, "verlet": 0.15, "central-difference": 0.15, "approx-implicit": 0.02, "implicit": 0.15}
+
+
+@pytest.mark.parametrize("integrator", ALL)
+def test_a_sheet_swinging_down_from_two_corners_loses_energy_and_comes_to_hang(integrator, quiet):
+    """A horizontal 0.4 m cotton sheet pinned at two adjacent corners swings down under gravity and drag (2 /s):
+    finite every frame, its total energy never above the start (by 1e-4 J, against the 0.04 J the swing
+    releases: the one-step schemes' measured total wobbles by O(h)), and after 3 s it hangs (SWUNG_DOWN) with
+    less than 1 % of that in kinetic energy (5e-4 J; measured 8e-5 J for the explicit three, 1e-5 J approx-implicit,
+    9e-7 J implicit). The explicit schemes run at 0.9 x their stable step, the others at 0.01 s."""
+    n = 8
+    sc = tc.Scene(sheet(n, 0.4), integrator=integrator, dt=0.01, fps=10, air_damping=2.0, precision="f64",
+                  pins=[{"indices": grid_top_corners(n)}])
+    if sc.stable_dt is not None:
+        sc.dt = 0.9 * sc.stable_dt
+    y0, e0 = sc.positions()[:, 1].mean(), sc.measure().total
+    for _ in range(30):
+        sc.run(1, progress=False)
+        m = sc.measure()
+        assert m.nonfinite == 0 and m.total <= e0 + 1e-4
+    assert y0 - sc.positions()[:, 1].mean() > SWUNG_DOWN[integrator]
+    assert m.kinetic < 5e-4
 
 
 @pytest.mark.slow
@@ -184,31 +221,41 @@ def test_stretch_limit_holds_the_limit():
     assert sc.controller("stretch_limit").stats["stretch_unconverged_steps"] < 0.05 * 480
 
 
-@pytest.mark.parametrize("integrator", ["explicit", "verlet", "central-difference", "implicit"])
-def test_internal_forces_conserve_momentum(integrator):
-    """No gravity, no pins, no drag: total momentum of a deformed, moving sheet is constant."""
+def test_internal_forces_conserve_momentum(free_sheet):
+    """No gravity, no pins, no drag: total momentum of a deformed, moving sheet is constant. approx-implicit's
+    filter conserves it only where every particle has the same r = h^2 K / (m + h^2 K) (then sum m dv = (1 - r)
+    h sum f = 0): on this grid r differs by 6e-7 of itself, which leaves 3e-11 kg m/s of the 1e-3 in 300 steps
+    (measured), hence its 1e-9."""
+    sc, integrator = free_sheet, free_sheet.integrator.name
     rng = np.random.default_rng(1)
-    cloth = sheet(6, 0.3)
-    sc = tc.Scene(cloth, integrator=integrator, dt=1e-4, gravity=(0, 0, 0), air_damping=0.0, precision="f64",
-                  integrator_options=TIGHT_CG if integrator == "implicit" else None)
-    sc.state.set(x=cloth.positions + 0.003 * rng.standard_normal(cloth.positions.shape),
-                 v=0.1 * rng.standard_normal(cloth.positions.shape))
+    sc.reset()
+    sc.dt = 1e-4
+    sc.forces.set_gravity((0.0, 0.0, 0.0))
+    x0, mass = sc.model.data.positions, sc.model.data.mass
+    sc.state.set(x=x0 + 0.003 * rng.standard_normal(x0.shape), v=0.1 * rng.standard_normal(x0.shape))
     sc.integrator.reset()
-    p0 = cloth.mass @ sc.velocities()
+    p0 = mass @ sc.velocities()
     sc.step(300)
-    np.testing.assert_allclose(cloth.mass @ sc.velocities(), p0, atol=1e-12)
+    np.testing.assert_allclose(mass @ sc.velocities(), p0, atol=1e-9 if integrator == "approx-implicit" else 1e-12)
 
 
-def test_fixed_pins_do_not_move_and_moving_pins_follow_their_keyframes():
+@pytest.mark.parametrize("integrator", ALL)
+def test_fixed_pins_do_not_move_and_moving_pins_follow_their_keyframes(integrator, quiet):
+    """Whatever the integrator, a fixed pin stays exactly where it was and a moving one is on its keyframed path
+    at the frame ends (to 1 um, the f32 rounding of a 1 m coordinate being 6e-8 m). The explicit schemes run at
+    0.9 x their stable step, the frame (1/200 s) split into equal steps."""
     n = 8
     keys = [[0.0, 0, 0, 0], [0.5, 0.1, 0.0, 0.0], [1.0, 0.1, 0.2, 0.0]]
-    sc = tc.Scene(sheet(n, 0.4, plane="xy"), integrator="approx-implicit", dt=1 / 200,
+    sc = tc.Scene(sheet(n, 0.4, plane="xy"), integrator=integrator, dt=1 / 200, fps=200,
                   pins=[{"indices": [grid_top_corners(n)[0]]}, {"indices": [grid_top_corners(n)[1]], "path": keys}])
+    if sc.stable_dt is not None:
+        sc.dt = 0.9 * sc.stable_dt
     fixed, moving = grid_top_corners(n)
     x0 = sc.positions()
     for t_end, offset in ((0.25, [0.05, 0, 0]), (0.75, [0.1, 0.1, 0]), (1.5, [0.1, 0.2, 0])):
-        sc.step(int(round((t_end - sc.state.t) * 200)))
+        sc.run(int(round((t_end - sc.state.t) * 200)), progress=False)
         x = sc.positions()
+        assert np.isfinite(x).all()
         np.testing.assert_array_equal(x[fixed], x0[fixed])
         np.testing.assert_allclose(x[moving], x0[moving] + offset, atol=1e-6)
 
