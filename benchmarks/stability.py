@@ -31,7 +31,7 @@ import numpy as np
 
 from taichi_cloth import runtime
 from taichi_cloth.adaptive import AdaptiveOptions
-from taichi_cloth.adaptive import AdaptiveOptions, frame_steps, step_cap
+from taichi_cloth.adaptive import frame_steps, step_cap
 from taichi_cloth.errors import BlowUpError
 from taichi_cloth.integrators import INTEGRATORS
 from taichi_cloth.stability import omega_max_exact, stable_dt

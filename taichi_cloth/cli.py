@@ -19,10 +19,9 @@ from .body import cli as body_cli
 from .errors import BlowUpError, MeshError, PatternError, SceneError
 from .flatten import flatten_pieces, format_table, plot_flat, write_flat_dxf
 from .garment.pattern import unit_scale
-from .guards import MAX_STEPS, check_run_length
+from .guards import MAX_STEPS
 from .integrators import INTEGRATORS
 from .material import MATERIALS
-from .paths import free_stem
 from .quality import QUALITIES
 
 EXIT_BAD_INPUT = 2
