@@ -23,6 +23,7 @@ from .guards import MAX_STEPS
 from .integrators import INTEGRATORS
 from .material import MATERIALS
 from .quality import QUALITIES
+from .run import run_scene_file as run_and_record
 
 EXIT_BAD_INPUT = 2
 EXIT_BLOWUP = 3
@@ -61,9 +62,7 @@ def run_scene_file(scene_path, args, quiet: bool = False):
     """`python -m taichi_cloth run` and the scene demos: taichi_cloth.run.run_scene_file (load with the CLI
     overrides in `args`, run, record to OUT/NAME.rrd, export the final mesh beside it), then the line that opens
     the recording. Returns (summary, loaded scene)."""
-    from .run import run_scene_file as run
-
-    summary, loaded = run(scene_path, args, quiet)
+    summary, loaded = run_and_record(scene_path, args, quiet)
     if loaded.output["record"] and not quiet:
         print(f"open the recording with:  {rerun_command()} {summary.outputs[0]}")
     return summary, loaded

@@ -31,8 +31,6 @@ LAZY = ("rerun", "playwright", "warp", "pxr", "ray", "matplotlib", "trimesh", "m
         "taichi_cloth.garment.local",   # scipy.spatial, for a garment refined locally
         "taichi_cloth.garment.dxf",     # ezdxf
         "taichi_cloth.body")            # fit_body: scipy, for a [body] table
-#: being rewritten elsewhere right now: their imports move to the top with that work (then drop them here)
-LAZY_FOR_NOW = ("taichi_cloth.cli.run_scene_file",)
 
 
 def modules() -> dict[str, Path]:
@@ -111,7 +109,7 @@ def local_imports(mods: dict[str, Path]) -> list[str]:
                     continue
                 for target in targets:
                     lazy = any(target == m or target.startswith(m + ".") for m in LAZY)
-                    if not lazy and name not in LAZY_FOR_NOW and where not in LAZY_FOR_NOW:
+                    if not lazy:
                         out.append(f"{where}: {target}")
     return out
 
