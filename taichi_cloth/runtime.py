@@ -16,6 +16,8 @@ from __future__ import annotations
 
 import atexit
 import os
+import time
+from pathlib import Path
 
 import taichi as ti
 from taichi.lang import impl
@@ -49,11 +51,31 @@ def init(arch: str = "cpu", parallel_from: int | None = None, **kwargs) -> None:
     global _saves_cache_at_exit
     kwargs.setdefault("offline_cache", True)
     kwargs.setdefault("log_level", ti.WARN)
+    if kwargs["offline_cache"]:
+        clear_stale_cache_lock(Path(kwargs.get("offline_cache_file_path") or os.environ.get(
+            "TI_OFFLINE_CACHE_FILE_PATH") or Path.home() / ".cache" / "taichi" / "ticache"))
     ti.init(arch=gpu_arch() if arch == "gpu" else _ARCHS[arch], **kwargs)
     _current_arch = arch
     if not _saves_cache_at_exit:
         atexit.register(_save_kernel_cache)
         _saves_cache_at_exit = True
+
+
+#: a cache lock older than this [s] was left by a process killed while it wrote the cache (writing takes seconds)
+STALE_LOCK_AGE = 600.0
+
+
+def clear_stale_cache_lock(folder: Path) -> None:
+    """Remove the offline cache's lock file when a killed process left it behind: Taichi then refuses to write the
+    cache in every later run, and every run compiles every kernel again. Says so in one warning."""
+    lock = folder / "ticache.lock"
+    try:
+        age = time.time() - lock.stat().st_mtime
+    except OSError:  # no lock: nothing to clear
+        return
+    if age > STALE_LOCK_AGE:
+        lock.unlink(missing_ok=True)
+        warn(f"removed the stale kernel-cache lock {lock} ({age / 60:.0f} min old, left by a killed process)")
 
 
 def _save_kernel_cache() -> None:
