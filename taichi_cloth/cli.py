@@ -22,6 +22,7 @@ from .garment.pattern import unit_scale
 from .guards import MAX_STEPS
 from .integrators import INTEGRATORS
 from .material import MATERIALS
+from .garment.garment import RESOLUTIONS
 from .quality import QUALITIES
 from .run import run_scene_file as run_and_record
 
@@ -38,6 +39,8 @@ def add_run_arguments(p: argparse.ArgumentParser, frames_default=None) -> None:
     p.add_argument("--precision", choices=("f32", "f64"), help="field precision (default: the scene's)")
     p.add_argument("--quality", choices=QUALITIES, help="a measured preset (integrator, step, level) from `bench "
                    "tradeoff`: preview | balanced | accurate; --integrator and --dt still override it")
+    p.add_argument("--resolution", choices=tuple(RESOLUTIONS), help="a garment's particle spacing: draft (2 cm), fit "
+                   "(1 cm) or fine (5 mm); coarse to fine also its levels (3, 5, 6)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--yes", action="store_true", help="run even when the run has more steps than the guard allows "
                    f"({MAX_STEPS:,}; the count and an estimated time are printed first)")

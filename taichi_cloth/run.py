@@ -4,7 +4,7 @@
 `run_scene_file` does that, runs it, records it to OUT/NAME.rrd, exports the final mesh beside it and prints the
 summary (taichi_cloth.cli.run_scene_file, which the demos call, adds the line that opens the recording). Both read
 their overrides from an argparse.Namespace made by `taichi_cloth.cli.add_run_arguments` (out, frames, integrator,
-dt, arch, precision, quality, no_progress, yes, png, until_rest); an attribute it lacks counts as not given.
+dt, arch, precision, quality, resolution, no_progress, yes, png, until_rest); an attribute it lacks counts as not given.
 """
 from __future__ import annotations
 
@@ -32,7 +32,8 @@ def load_scene_file(source: str | Path | dict, args: argparse.Namespace,
     runtime.init(getattr(args, "arch", None) or "cpu")
     loaded = load_scene(source, frames=getattr(args, "frames", None), integrator=getattr(args, "integrator", None),
                         dt=getattr(args, "dt", None), precision=getattr(args, "precision", None),
-                        out=getattr(args, "out", None), quality=getattr(args, "quality", None), base_dir=base_dir)
+                        out=getattr(args, "out", None), quality=getattr(args, "quality", None),
+                        resolution=getattr(args, "resolution", None), base_dir=base_dir)
     if getattr(args, "until_rest", False):
         loaded.scene.stop_at_rest = True
     check_run_length(loaded.scene, loaded.frames, confirmed=getattr(args, "yes", False),

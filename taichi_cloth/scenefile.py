@@ -58,6 +58,8 @@ and a component whose table is absent is never built. The schema (units in brack
     [multilevel.settle]           # a level is settled when all hold: max_speed [m/s] = 0.05, energy_change = 1e-4
                                   # (|dE| over `window` = 10 frames / (weight x cloth size)); max_time [s] = 3.0
                                   # refines anyway
+    # resolution = "fit"         # a garment at a preset spacing: draft (2 cm), fit (1 cm), fine (5 mm); with
+                                  # [multilevel] and no levels there, also its levels (3, 5, 6)
     # garment = "skirt.toml"     # a garment file (taichi_cloth.garment.garmentfile): pieces placed around the
                                   # mannequin, sewn, joined, draped; [cloth] material overrides the file's
     [sewing]                      # for a garment: close_speed [m/s] = 0.5 (seam rest lengths shrink this fast),
@@ -87,6 +89,7 @@ from .body.landmarks import Body
 from .builder import ClothBuilder
 from .errors import BodyError, MeshError, PatternError, SceneError
 from .garment.garment import build_garment
+from .garment.garment import RESOLUTIONS
 from .garment.garmentfile import load_garment
 from .garment.levels import multilevel_garment
 from .guards import check_memory, check_precision, grid_particles
@@ -126,6 +129,7 @@ SCHEMA = Table({
         "mesh": Table({"path": Field("str"), "scale": Field("number", 1.0, positive),
                        "translate": Field("vec3", [0.0, 0.0, 0.0])}),
         "garment": Field("str", None),
+        "resolution": Field("str", None, choices=tuple(RESOLUTIONS)),
     }, required=True),
     "integrator": Table({"name": Field("str", choices=tuple(INTEGRATORS)),
                          "dt": DT_FIELD, "adaptive": ADAPTIVE_TABLE,
@@ -210,6 +214,9 @@ def parse_scene(source: str | Path | dict, base_dir: Path | None = None, label: 
                + (f" (got {' and '.join(sources)})" if sources else ""))
     if cfg.get("sewing") is not None and cloth.get("garment") is None:
         v.fail("[sewing]", "needs a garment cloth ([cloth] garment = \"file.toml\")")
+    if cloth.get("resolution") is not None and cloth.get("garment") is None:
+        v.fail("[cloth] resolution", "is a garment's preset (draft, fit, fine); a grid takes [cloth.grid] resolution "
+                                     "= [nx, ny] particles")
     _check_integrator_options(v, cfg["integrator"])
     ml, grid = cfg.get("multilevel"), cloth.get("grid")
     if ml is not None:
@@ -299,11 +306,13 @@ def build_scene(cfg: dict) -> Scene:
             path = Path(cloth_cfg["garment"])
             path = path if path.is_absolute() else cfg["_base_dir"] / path
             spec = load_garment(path, material=mat if cloth_cfg.get("material") else None)
+            if cloth_cfg.get("resolution") is not None:
+                spec.at_resolution(cloth_cfg["resolution"])
             stiffness = (cfg.get("sewing") or {}).get("stiffness")
             if ml is None:
                 data = build_garment(spec, body, seam_stiffness=stiffness)
             else:  # sewn on a coarse level, refined as the drape settles
-                spec.levels = ml["levels"] or spec.levels
+                spec.levels = ml["levels"] or spec.coarse_to_fine_levels
                 data = multilevel_garment(spec, body, stiffness, ml["start_level"] - 1)
         else:
             m = cloth_cfg["mesh"]
@@ -391,11 +400,12 @@ def _apply_quality(cfg: dict) -> None:
 def load_scene(source: str | Path | dict, *, frames: int | None = None, integrator: str | None = None,
                dt: float | None = None, precision: str | None = None, out: str | Path | None = None,
                integrator_options: dict | None = None, quality: str | None = None,
-               base_dir: str | Path | None = None) -> LoadedScene:
+               resolution: str | None = None, base_dir: str | Path | None = None) -> LoadedScene:
     """Parse and build a scene; keyword arguments override the file (as the CLI flags do).
 
     `quality` (preview | balanced | accurate) replaces the file's integrator, options, dt and level by the
-    measured preset (taichi_cloth.quality); `integrator` and `dt` then override the preset's choice.
+    measured preset (taichi_cloth.quality); `integrator` and `dt` then override the preset's choice. `resolution`
+    (draft | fit | fine) meshes a garment at that preset (taichi_cloth.garment.garment.RESOLUTIONS).
     Overriding the integrator drops the file's options that the new integrator does not have. A scene given as a
     dict reads its relative paths from `base_dir` (default: the current folder)."""
     cfg = parse_scene(source, Path(base_dir) if base_dir is not None else None)
@@ -422,6 +432,10 @@ def load_scene(source: str | Path | dict, *, frames: int | None = None, integrat
         cfg["precision"] = v.value(Field("str", choices=("f32", "f64")), precision, "--precision")
     if out is not None:
         cfg["output"]["dir"] = str(out)
+    if resolution is not None:
+        cfg["cloth"]["resolution"] = v.value(Field("str", choices=tuple(RESOLUTIONS)), resolution, "--resolution")
+        if cfg["cloth"].get("garment") is None:
+            v.fail("--resolution", "is a garment's preset; this scene's cloth is not a garment")
     check_output_dir(cfg["output"]["dir"], cfg["_label"])
     scene = build_scene(cfg)
     check_precision(scene, cfg["precision"], cfg["_label"])

@@ -168,6 +168,21 @@ def test_bad_garment_file_gets_one_clear_error(tmp_path, change, words):
         assert w in msg
 
 
+def test_a_resolution_preset_sets_the_spacing_and_the_coarse_to_fine_levels(tmp_path):
+    from taichi_cloth.garment.garment import RESOLUTIONS
+
+    spec = load_garment(_garment_file(tmp_path, GOOD.replace("spacing = 4", 'resolution = "fit"')))
+    assert spec.spacing == 0.01 and spec.resolution == "fit"
+    assert spec.levels == 1 and spec.coarse_to_fine_levels == RESOLUTIONS["fit"][1] == 5
+    spec = load_garment(_garment_file(tmp_path, GOOD.replace("spacing = 4", 'resolution = "fine"\nlevels = 3')))
+    assert spec.spacing == 0.005 and spec.coarse_to_fine_levels == 3  # the file's levels win
+    for text, words in ((GOOD.replace("spacing = 4", 'spacing = 4\nresolution = "fit"'), "not both"),
+                        (GOOD.replace("spacing = 4", ""), "not neither"),
+                        (GOOD.replace("spacing = 4", 'resolution = "final"'), "resolution")):
+        with pytest.raises(PatternError, match=words):
+            load_garment(_garment_file(tmp_path, text))
+
+
 def test_open_outline_is_an_error():
     a = PatternPiece.from_polygon("open", [[0, 0], [1, 0], [1, 1]])
     from taichi_cloth.garment.pattern import Segment

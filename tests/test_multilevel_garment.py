@@ -147,6 +147,13 @@ def test_scene_file_runs_a_garment_coarse_to_fine_and_names_bad_tables(tmp_path)
         load_scene(dict(scene, sewing={"join": "spring"}), out=tmp_path)
     with pytest.raises(SceneError, match="levels >= 2"):
         load_scene(dict(scene, multilevel={"levels": 1}), out=tmp_path)
+    # a resolution preset: its spacing, and its levels where [multilevel] names none
+    drafted = load_scene(dict(scene, multilevel={"start_level": 1}), resolution="draft", out=tmp_path).scene
+    assert drafted.controller("refiner").cloth.n_levels == 3
+    assert drafted.controller("sewing").garment.spec.spacing == 0.02
+    with pytest.raises(SceneError, match="--resolution: is a garment's preset"):
+        load_scene({"cloth": {"grid": {"size": [0.2, 0.2], "resolution": [3, 3]}},
+                    "integrator": {"name": "explicit", "dt": 1e-3}}, resolution="fit", out=tmp_path)
 
 
 def test_recording_and_self_collision_follow_the_switches(tmp_path):

@@ -101,6 +101,8 @@ def test_overrides_replace_integrator_and_step(tmp_path):
     (('frames = 3', 'frames = 3\n[[colliders]]\ntype = "cube"'), "[[colliders]] #1 type: 'cube' is not one of: sphere"),
     (('frames = 3', 'frames = 3\n[sewing]\ngravity = true'), "[sewing]: needs a garment cloth"),
     (('frames = 3', 'frames = 3\nself_collision = "yes"'), "self_collision: must be true or false"),
+    (('[cloth]', '[cloth]\nresolution = "fit"'), "[cloth] resolution: is a garment's preset"),
+    (('[cloth]', '[cloth]\nresolution = "coarse"'), "[cloth] resolution: 'coarse' is not one of: draft"),
 ])
 def test_each_mistake_names_its_key(tmp_path, edit, expected):
     old, new = edit

@@ -65,6 +65,11 @@ class FixedPoint:
     offset: float = 0.005
 
 
+#: garment resolution presets: name -> (particle spacing [m], 4-8 levels coarse to fine). Garment tools draft at
+#: about 2 cm and fit at about 1 cm; the levels put the level a garment is sewn on near 3-4 cm whatever the finest.
+RESOLUTIONS = {"draft": (0.02, 3), "fit": (0.01, 5), "fine": (0.005, 6)}
+
+
 @dataclass
 class GarmentSpec:
     """Everything a garment file holds (our equivalent of Hsiao 2006's .gar file). Lengths in metres.
@@ -72,7 +77,8 @@ class GarmentSpec:
     name; pieces: PatternPiece list; seams: Seam list; placements: piece name -> Placement (around the body)
     or FreePlacement (every piece needs one); fixed: FixedPoint list; material: preset name or Material; spacing: particle spacing on the piece
     boundaries [m] (the interior lattice has the same cell); levels: 4-8 levels meshed per piece (the finest
-    is simulated; the spacing is that of the finest level).
+    is simulated; the spacing is that of the finest level); resolution: the RESOLUTIONS preset that set the
+    spacing, if one did (None: the file's spacing).
     """
 
     name: str
@@ -83,6 +89,23 @@ class GarmentSpec:
     material: str | Material = "cotton"
     spacing: float = 0.02
     levels: int = 1
+
+    resolution: str | None = None
+
+    def at_resolution(self, name: str) -> None:
+        """Mesh at the preset `name` of RESOLUTIONS (its spacing; its levels when run coarse to fine)."""
+        if name not in RESOLUTIONS:
+            raise PatternError(f"garment {self.name!r}: resolution must be one of {', '.join(RESOLUTIONS)}, got "
+                               f"{name!r}")
+        self.spacing, self.resolution = RESOLUTIONS[name][0], name
+
+    @property
+    def coarse_to_fine_levels(self) -> int:
+        """The levels to run coarse to fine on: the file's `levels` where it names several, else its resolution's
+        (else 1: the caller refuses)."""
+        if self.levels > 1 or self.resolution is None:
+            return self.levels
+        return RESOLUTIONS[self.resolution][1]
 
     def piece(self, name: str) -> PatternPiece:
         for p in self.pieces:

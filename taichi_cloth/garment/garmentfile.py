@@ -5,7 +5,9 @@ material and placement of a garment; every length is in the file's `units`.
     units = "cm"                  # m | cm | mm | in: every length below (outline, spacing, at, offset, height)
     material = "cotton"           # a preset, or a table: preset, density [kg/m^2], stretch [N/m], shear, bend, damping,
                                   # viscosity [m^2/s]
-    spacing = 2.0                 # particle spacing along the outlines (and the interior lattice cell)
+    spacing = 2.0                 # particle spacing along the outlines (and the interior lattice cell), or
+    # resolution = "fit"          # a preset instead: "draft" (2 cm), "fit" (1 cm), "fine" (5 mm); coarse to fine
+                                  # it also sets the levels (3, 5, 6: the coarsest near 3-4 cm)
     levels = 1                    # 4-8 levels meshed per piece (the finest, at `spacing`, is simulated)
     # dxf = "skirt.dxf"           # pieces from a DXF file: a [[pieces]] entry without `outline` takes the DXF
                                   # piece of its name (layer or block); `corners = { hem_left = 0, ... }` names
@@ -44,7 +46,7 @@ from pathlib import Path
 from ..errors import PatternError
 from ..material import Material
 from ..schema import MATERIAL_TABLE, Array, Field, Table, Validator, material_of, nonneg, positive, read_toml
-from .garment import FixedPoint, FreePlacement, GarmentSpec
+from .garment import RESOLUTIONS, FixedPoint, FreePlacement, GarmentSpec
 from .pattern import PatternPiece, unit_scale
 from .placement import Placement
 from .seams import DEFAULT_LENGTH_TOLERANCE, Seam, SeamSide
@@ -55,7 +57,8 @@ GARMENT_SCHEMA = Table({
     "name": Field("str", None),
     "units": Field("str", "m", choices=("m", "cm", "mm", "in")),
     "material": MATERIAL_TABLE,
-    "spacing": Field("number", check=positive),
+    "spacing": Field("number", None, check=positive),
+    "resolution": Field("str", None, choices=tuple(RESOLUTIONS)),
     "levels": Field("int", 1, lambda v: None if 1 <= v <= 6 else "must lie in 1..6"),
     "dxf": Field("str", None),
     "pieces": Array(Table({
@@ -100,6 +103,9 @@ def _placement(pl: dict, s: float, where: str):
 
 def _spec(cfg: dict, path: Path, material: Material | None) -> GarmentSpec:
     s = unit_scale(cfg["units"])
+    if (cfg["spacing"] is None) == (cfg["resolution"] is None):
+        raise PatternError("give either spacing (a length) or resolution (draft, fit or fine), not "
+                           + ("both" if cfg["spacing"] is not None else "neither"))
     dxf_pieces = None
     if cfg["dxf"] is not None:
         from .dxf import read_dxf  # ezdxf (0.5 s to import): only a garment drawn in a DXF file
@@ -147,7 +153,9 @@ def _spec(cfg: dict, path: Path, material: Material | None) -> GarmentSpec:
                         (s * f["point"][0], s * f["point"][1]), f["anchor"],
                         **({} if f["offset"] is None else {"offset": s * f["offset"]})) for f in cfg["fixed"]]
     mat = material if material is not None else material_of(cfg.get("material"))
-    spec = GarmentSpec(cfg["name"], list(pieces.values()), seams, placements, fixed, mat, s * cfg["spacing"],
-                       cfg["levels"])
+    spec = GarmentSpec(cfg["name"], list(pieces.values()), seams, placements, fixed, mat,
+                       s * (cfg["spacing"] or 1.0), cfg["levels"])
+    if cfg["resolution"] is not None:
+        spec.at_resolution(cfg["resolution"])
     spec.validate()
     return spec
