@@ -25,9 +25,14 @@ per piece) in percentage points and which entry it is, the same without the max 
 particles inside the body. The wall times include the run's closing check (exact distances of every particle
 to the body's 26,756 triangles, for the summary's "no particle inside" line: about 0.7 s).
 
-    python benchmarks/multilevel_garment.py [--frames 1800] [--arch cpu|gpu] [--modes NAME ...]
+With --resolution (draft, fit or fine: 2 cm, 1 cm, 5 mm) the T-shirt is meshed at that preset and on its levels
+(taichi_cloth.garment.garment.RESOLUTIONS; --levels overrides): "finest" starts on the last of them, coarse to fine
+on the first, and "5 levels" means the preset's levels.
 
-Writes out/bench/multilevel_garment.csv.
+    python benchmarks/multilevel_garment.py [--frames 1800] [--arch cpu|gpu] [--modes NAME ...]
+                                            [--resolution draft|fit|fine] [--levels N]
+
+Writes out/bench/multilevel_garment.csv (multilevel_garment-RESOLUTION.csv with --resolution).
 """
 from __future__ import annotations
 
@@ -42,6 +47,7 @@ import numpy as np
 
 import taichi_cloth as tc
 from collision.distance import unsigned_distance
+from taichi_cloth.garment.garment import RESOLUTIONS
 from taichi_cloth.garment.metrics import garment_quality
 from taichi_cloth.scenefile import load_scene
 
@@ -51,8 +57,8 @@ SCENE = ROOT / "demos" / "scenes" / "sew_tshirt_multilevel.toml"
 
 #: the runs: run_to_rest's arguments by name
 RUNS = {
-    "finest": dict(start_level=3),
-    "finest (noise)": dict(start_level=3, noise=1e-7),
+    "finest": dict(start_level=-1),
+    "finest (noise)": dict(start_level=-1, noise=1e-7),
     "coarse-to-fine": dict(start_level=1),
     "coarse-to-fine, dt x sqrt(2) per level": dict(start_level=1, dt_growth=2 ** 0.5),
     "local": dict(start_level=1, refine="local"),
@@ -63,12 +69,15 @@ DEFAULT_MODES = ["finest", "finest (noise)", "coarse-to-fine", "coarse-to-fine, 
 
 
 def run_to_rest(start_level: int, frames: int, noise: float = 0.0, dt_growth: float = 1.0, refine: str = "global",
-                levels: int = 3, preconditioner: str = "auto"):
-    """(figures dict, rest positions (P,3), triangles (T,3)) of the T-shirt run from start_level (1-based) of
-    `levels`, refined `refine` ("global" or "local"), CG preconditioned by `preconditioner`."""
+                levels: int = 3, preconditioner: str = "auto", resolution: str | None = None):
+    """(figures dict, rest positions (P,3), triangles (T,3)) of the T-shirt (at the `resolution` preset, if named)
+    run from start_level (1-based; -1: the finest) of `levels`, refined `refine` ("global" or "local"), CG
+    preconditioned by `preconditioner`."""
     cfg = tomllib.loads(SCENE.read_text())
+    if resolution is not None:
+        cfg["cloth"]["resolution"] = resolution
     cfg["multilevel"]["levels"] = levels
-    cfg["multilevel"]["start_level"] = start_level
+    cfg["multilevel"]["start_level"] = levels if start_level == -1 else start_level
     cfg["multilevel"]["dt_growth"] = dt_growth
     cfg["multilevel"]["refine"] = refine
     cfg["integrator"]["preconditioner"] = preconditioner
@@ -112,14 +121,21 @@ def main(argv=None) -> int:
     ap.add_argument("--arch", choices=("cpu", "gpu"), default="cpu")
     ap.add_argument("--modes", nargs="+", choices=list(RUNS), default=DEFAULT_MODES,
                     help="the runs (finest and coarse-to-fine always: the others are compared with them)")
+    ap.add_argument("--resolution", choices=tuple(RESOLUTIONS), help="the T-shirt at this preset (default: the "
+                    "garment file's 2 cm on 3 levels)")
+    ap.add_argument("--levels", type=int, help="coarse-to-fine levels (default: the preset's, else 3)")
     args = ap.parse_args(argv)
+    levels = args.levels or (RESOLUTIONS[args.resolution][1] if args.resolution else 3)
 
     tc.init(args.arch)
     always = ["finest", "coarse-to-fine"]
     modes = always + [m for m in RUNS if m in args.modes and m not in always]
     results = {}
     for name in modes:
-        results[name] = run_to_rest(frames=args.frames, **RUNS[name])
+        run = dict(RUNS[name], resolution=args.resolution)
+        if "levels" not in run or args.resolution:
+            run["levels"] = levels
+        results[name] = run_to_rest(frames=args.frames, **run)
         r = results[name][0]
         print(f"{name}: {r['wall']:.1f} s wall, {r['sim']:.2f} s simulated, at rest {r['at_rest']}, levels "
               f"{r['levels']}, {r['ms_per_step']:.1f} ms and {r['cg_per_step']:.0f} CG iterations per step "
@@ -147,11 +163,12 @@ def main(argv=None) -> int:
               f"{r['ms_per_step']:.1f} | {r['cg_per_step']:.0f} |")
     out = ROOT / "out" / "bench"  # the csv beside the scenes' recordings
     out.mkdir(parents=True, exist_ok=True)
-    with open(out / "multilevel_garment.csv", "w", newline="") as fh:
+    csv_path = out / f"multilevel_garment{'-' + args.resolution if args.resolution else ''}.csv"
+    with open(csv_path, "w", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=list(rows[0]))
         w.writeheader()
         w.writerows(rows)
-    print(f"wrote {out / 'multilevel_garment.csv'}")
+    print(f"wrote {csv_path}")
     return 0
 
 
