@@ -40,7 +40,7 @@ def add_run_arguments(p: argparse.ArgumentParser, frames_default=None) -> None:
     p.add_argument("--quality", choices=QUALITIES, help="a measured preset (integrator, step, level) from `bench "
                    "tradeoff`: preview | balanced | accurate; --integrator and --dt still override it")
     p.add_argument("--resolution", choices=tuple(RESOLUTIONS), help="a garment's particle spacing: draft (2 cm), fit "
-                   "(1 cm) or fine (5 mm); coarse to fine also its levels (3, 5, 6)")
+                   "(1 cm) or fine (5 mm); coarse to fine also its levels (3, 5, 5)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--yes", action="store_true", help="run even when the run has more steps than the guard allows "
                    f"({MAX_STEPS:,}; the count and an estimated time are printed first)")

@@ -59,7 +59,7 @@ and a component whose table is absent is never built. The schema (units in brack
                                   # (|dE| over `window` = 10 frames / (weight x cloth size)); max_time [s] = 3.0
                                   # refines anyway
     # resolution = "fit"         # a garment at a preset spacing: draft (2 cm), fit (1 cm), fine (5 mm); with
-                                  # [multilevel] and no levels there, also its levels (3, 5, 6)
+                                  # [multilevel] and no levels there, also its levels (3, 5, 5)
     # garment = "skirt.toml"     # a garment file (taichi_cloth.garment.garmentfile): pieces placed around the
                                   # mannequin, sewn, joined, draped; [cloth] material overrides the file's
     [sewing]                      # for a garment: close_speed [m/s] = 0.5 (seam rest lengths shrink this fast),

@@ -66,8 +66,10 @@ class FixedPoint:
 
 
 #: garment resolution presets: name -> (particle spacing [m], 4-8 levels coarse to fine). Garment tools draft at
-#: about 2 cm and fit at about 1 cm; the levels put the level a garment is sewn on near 3-4 cm whatever the finest.
-RESOLUTIONS = {"draft": (0.02, 3), "fit": (0.01, 5), "fine": (0.005, 6)}
+#: about 2 cm and fit at about 1 cm. An odd number of levels ends on a square-lattice level at the spacing (an even
+#: one on the diagonal level below it, with twice the particles); the first level is at 2 ** ((levels - 1) // 2)
+#: times the spacing: 4 cm, 4 cm and 2 cm.
+RESOLUTIONS = {"draft": (0.02, 3), "fit": (0.01, 5), "fine": (0.005, 5)}
 
 
 @dataclass

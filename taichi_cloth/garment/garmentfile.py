@@ -7,7 +7,7 @@ material and placement of a garment; every length is in the file's `units`.
                                   # viscosity [m^2/s]
     spacing = 2.0                 # particle spacing along the outlines (and the interior lattice cell), or
     # resolution = "fit"          # a preset instead: "draft" (2 cm), "fit" (1 cm), "fine" (5 mm); coarse to fine
-                                  # it also sets the levels (3, 5, 6: the coarsest near 3-4 cm)
+                                  # it also sets the levels (3, 5, 5: the first at 4, 4 and 2 cm)
     levels = 1                    # 4-8 levels meshed per piece (the finest, at `spacing`, is simulated)
     # dxf = "skirt.dxf"           # pieces from a DXF file: a [[pieces]] entry without `outline` takes the DXF
                                   # piece of its name (layer or block); `corners = { hem_left = 0, ... }` names
