@@ -30,6 +30,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from .paths import free_path
+from .still import FRAME_MARGIN
 from .strain import strain_colormap, strain_colors
 
 #: the engine's world: right-handed, Y up (+z is the body's front)
@@ -285,12 +286,14 @@ class Recorder:
 
     def _blueprint(self, lo: np.ndarray, hi: np.ndarray) -> rrb.Blueprint:
         """The default layout: the 3D view (a camera in front (+z) framing the box lo..hi [m] of every cloth's
-        last frame: the viewer opens a recording at its end) with the pattern as a tab for garments and the strain
-        legend below, the grouped plots and the events beside it."""
+        last frame as the still pictures' front view does: the viewer opens a recording at its end) with the
+        pattern as a tab for garments and the strain legend below, the grouped plots and the events beside it."""
         shown = self._shown
         center, size = 0.5 * (lo + hi), np.maximum(hi - lo, 0.05)
-        # the distance at which the box's front face fills the view (with a margin), from the front (+z)
-        half = 0.5 * max(size[1], size[0] / VIEW_ASPECT) * 1.25
+        # the distance at which the box's front face fills the view, from the front (+z), with the margin the still
+        # pictures frame the same box with (taichi_cloth.still: FRAME_MARGIN of its largest extent on each side)
+        pad = FRAME_MARGIN * float(size.max())
+        half = 0.5 * max(size[1] + 2 * pad, (size[0] + 2 * pad) / VIEW_ASPECT)
         distance = half / np.tan(np.radians(CAMERA_FOV_Y) / 2) + 0.5 * size[2]
         eye = rrb.EyeControls3D(position=(center + [0.0, 0.1 * size[1], distance]).tolist(),
                                 look_target=center.tolist(), eye_up=[0.0, 1.0, 0.0])
