@@ -60,14 +60,14 @@ class Panel:
 def body_meshes(scene) -> list:
     """(vertices (V,3) [m], triangles (T,3)) of every mesh collider of the scene (the body, as it is now) and of
     every sphere collider (an icosphere)."""
-    import trimesh  # 0.7 s to import: only to draw a sphere collider
-
     colliders = scene.controller("colliders")
     if colliders is None:
         return []
     out = [(np.asarray(m.vertices_np, np.float64), np.asarray(m.triangles_np, np.int64)) for m in colliders.bodies]
     for obj in colliders.objects:
         for center, radius in getattr(obj, "spheres_np", []):
+            import trimesh  # 0.7 s to import: only to draw a sphere collider
+
             ball = trimesh.creation.icosphere(subdivisions=3, radius=radius)
             out.append((np.asarray(ball.vertices) + center, np.asarray(ball.faces, np.int64)))
     return out
@@ -231,16 +231,16 @@ def render_views(cloth_x: np.ndarray, cloth_triangles: np.ndarray, cloth_rgb: np
     return panels
 
 
-def render_still(scene, path, title: str | None = None, full_scale: float = 0.1) -> Path:
+def render_still(scene, path, title: str | None = None, full_scale: float = 0.1, panel_px: int = PANEL_PX) -> Path:
     """Write a PNG at `path` of the scene's cloth as it is now (strain colours, red at `full_scale` strain) and its
     bodies (light grey): front, back and side views framed on the cloth (render_views), a title line (the scene,
-    t, the largest strain) and the strain legend. Returns the path."""
+    t, the largest strain) and the strain legend; panel_px: the panels' height [px] (frame). Returns the path."""
     data = scene.model.data
     x = np.asarray(scene.positions(), np.float64)[: data.n_particles]
     strain = vertex_strain(data, x)
     colormap = strain_colormap(full_scale)  # the recording's legend and vertex colours use the same map
     panels = render_views(x, np.asarray(data.triangles, np.int64), colormap.colors(strain)[:, :3] / 255.0,
-                          body_meshes(scene))
+                          body_meshes(scene), panel_px=panel_px)
     peak = float(strain.max()) if len(strain) else 0.0
     title = title or f"{scene.name}: t = {scene.state.t:.2f} s, max strain {100 * peak:.1f} %"
     return compose(panels, path, title, colormap)

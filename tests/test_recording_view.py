@@ -10,6 +10,7 @@ from matplotlib.image import imread
 
 from taichi_cloth.frame import FrameSnapshot, SceneLayout
 from taichi_cloth.recorder import CAMERA_FOV_Y, Recorder
+from taichi_cloth.still import FRAME_MARGIN
 from taichi_cloth.strain import STRAIN_STOPS, strain_colormap
 
 
@@ -94,13 +95,14 @@ def test_the_blueprint_lays_out_the_scene_the_pattern_the_legend_and_the_plots(g
     assert got["energy [J]"][:3] == ("TimeSeries", "/metrics", ["/metrics/cloth/energy/**"])
     assert got["events"][:3] == ("TextLog", "/", ["/cloth/events"])
     # the camera: in front (+z) of the first frame's box (x 0..1, y 1..2, z -0.25..0.25), looking at its centre, y
-    # up, at a distance where the box's 1 m high front face fills between half and all of the view's height
+    # up, at a distance where the box's 1 m high front face fills the view's height but for the still pictures'
+    # margin (FRAME_MARGIN of the box's largest extent above and below), as their front view frames it
     eye = got["scene"][3]
     np.testing.assert_allclose(eye["EyeControls3D:look_target"][0][0], [0.5, 1.5, 0.0], atol=1e-6)
     position = np.array(eye["EyeControls3D:position"][0][0])
     assert abs(position[0] - 0.5) < 1e-6 and eye["EyeControls3D:eye_up"][0][0] == [0, 1, 0]
     seen = 2 * (position[2] - 0.25) * np.tan(np.radians(CAMERA_FOV_Y / 2))  # the view's height at the front face
-    assert 1.0 < seen < 2.0
+    assert seen == pytest.approx(1.0 + 2 * FRAME_MARGIN)
 
 
 def test_the_legend_shows_the_strain_colour_map_in_per_cent(garment_recording):
