@@ -248,7 +248,7 @@ def render_still(scene, path, title: str | None = None, full_scale: float = 0.1,
 
 def compose(panels: list[Panel], path, title: str, colormap) -> Path:
     """Lay the panels out side by side at one pixel per pixel (no resampling), each named above, the title line
-    on top and the colour map's legend below, and write a PNG at `path`. Returns the path."""
+    on top and the colour map's legend below, and write an RGB PNG at `path`. Returns the path."""
     import matplotlib.cm  # matplotlib (0.5 s to import): only when a picture is drawn
     import matplotlib.colors
     from matplotlib.figure import Figure
@@ -272,7 +272,12 @@ def compose(panels: list[Panel], path, title: str, colormap) -> Path:
     low, high = colormap.range_percent
     fig.colorbar(matplotlib.cm.ScalarMappable(matplotlib.colors.Normalize(low, high), colormap.matplotlib()),
                  cax=bar, orientation="horizontal", label="strain [%] (the top colour: that and above)")
-    fig.savefig(path, dpi=dpi)
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from PIL import Image  # matplotlib's own PNG writer: here without the alpha channel (a sixth smaller)
+
+    canvas = FigureCanvasAgg(fig)
+    canvas.draw()
+    Image.fromarray(np.asarray(canvas.buffer_rgba())[..., :3]).save(path, format="png")
     return path
 
 
