@@ -78,7 +78,8 @@ def vertex_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     of the area vectors of each vertex's triangles, normalised (zero where a vertex has none or they cancel)."""
     v, t = np.asarray(vertices, np.float64), np.asarray(triangles, np.int64)
     area = np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])  # twice the area vector
-    n = np.stack([np.bincount(t.ravel(), np.repeat(area[:, c], 3), minlength=len(v)) for c in range(3)], axis=1)
+    n = np.stack([np.bincount(t.ravel(), np.repeat(area[:, c], 3), minlength=len(v)) for c in range(3)],
+                 axis=1).astype(np.float64)  # (bincount of no weights is an integer array)
     length = np.linalg.norm(n, axis=1, keepdims=True)
     return np.divide(n, length, out=np.zeros_like(n), where=length > 1e-30)
 
@@ -184,6 +185,7 @@ def render_views(cloth_x: np.ndarray, cloth_triangles: np.ndarray, cloth_rgb: np
     tris = np.asarray(cloth_triangles, np.int64).reshape(-1, 3)
     rgb = np.asarray(cloth_rgb, np.float64)
     pts = x[np.unique(tris)] if len(tris) else x
+    pts = pts if len(pts) else np.zeros((1, 3))  # no cloth: an empty frame round the origin
     scale, framing = frame(pts, views, panel_px, max_width_px)
     edge = float(np.median(np.linalg.norm(x[tris[:, 1]] - x[tris[:, 0]], axis=1))) if len(tris) else 0.0
     # the cloth lies a collision thickness (a few mm) off the body, but its flat triangles can cut the body's
