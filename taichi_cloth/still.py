@@ -6,7 +6,7 @@ that frame), under an orthographic camera, at a scale common to the three views 
 The views are drawn by a small z-buffered software rasterizer in numpy (rasterize: every pixel centre inside a
 triangle is a fragment, the nearest fragment per pixel wins) and smooth-shaded per pixel: the area-weighted vertex
 normals and the vertex colours are interpolated at each pixel and lit there, so folds and wrinkles read. It needs
-neither a display, nor OpenGL, nor Taichi, and it is deterministic (ties in depth: the triangle drawn first wins).
+neither a display, nor OpenGL, nor Taichi, and it is deterministic (ties in depth: the lower triangle index wins).
 matplotlib (Agg) only lays the views out and adds the title and the strain legend.
 """
 from __future__ import annotations
@@ -41,8 +41,11 @@ AMBIENT, KEY_WEIGHT, FILL_WEIGHT = 0.22, 0.68, 0.18
 SPECULAR, SHININESS = (0.06, 0.12), 24.0  # (cloth, body): a matte cloth, a slightly glossier body
 #: the panels' background, top and bottom of a vertical gradient (dark: the white of no strain stands out)
 BACKGROUND = ((0.33, 0.35, 0.39), (0.14, 0.15, 0.17))
-#: candidate pixels [count] a rasterizer pass handles at once (its memory: about 150 bytes each)
+#: candidate pixels [count] a rasterizer pass handles at once (its memory: about 100 bytes each)
 CHUNK = 1 << 20
+#: the bounding-box sizes [px] triangles are grouped by in rasterize (a box is rounded up to the next)
+BOX_SIZES = np.array([1, 2, 3, 4, 5, 6, 8, 10, 12, 14, 16, 20, 24, 28, 32, 40, 48, 56, 64, 80, 96, 112, 128, 160,
+                      192, 224, 256, 320, 384, 448, 512])
 
 
 @dataclass
@@ -92,7 +95,7 @@ def rasterize(screen: np.ndarray, depth: np.ndarray, shape: tuple[int, int]):
     screen: (T,3,2) float64 corner positions [px] (x right, y down; pixel (i, j)'s centre is at (j + 0.5, i + 0.5));
     depth: (T,3) corner depths (larger: nearer the viewer), linear across a triangle (an orthographic camera);
     shape: (H, W). A pixel centre on a shared edge belongs to both triangles (the depth test picks one), so no
-    cracks; among fragments at equal depth the one of the lower triangle index wins."""
+    cracks; among fragments at equal depth the one of the lower triangle index wins (deterministic)."""
     H, W = shape
     tri_at = np.full(H * W, -1, np.int64)
     bary = np.zeros((H * W, 3))
@@ -108,8 +111,7 @@ def rasterize(screen: np.ndarray, depth: np.ndarray, shape: tuple[int, int]):
     if not len(ids):
         return tri_at, bary, zbuf
     lo, hi = np.maximum(lo[ids], 0), np.minimum(hi[ids], [W - 1, H - 1])
-    width = hi[:, 0] - lo[:, 0] + 1
-    count = width * (hi[:, 1] - lo[:, 1] + 1)
+    ext = hi - lo + 1  # (width, height) [px] of each bounding box in the image
     # the barycentric coordinates l1, l2 and the depth as affine functions of the pixel position: a*x + b*y + c
     inv = 1.0 / det[ids]
     p0, e1, e2, d = s[ids, 0], e1[ids], e2[ids], np.asarray(depth, np.float64)[ids]
@@ -119,35 +121,43 @@ def rasterize(screen: np.ndarray, depth: np.ndarray, shape: tuple[int, int]):
     dz1, dz2 = d[:, 1] - d[:, 0], d[:, 2] - d[:, 0]
     coef = np.stack([a1, b1, c1, a2, b2, c2, a1 * dz1 + a2 * dz2, b1 * dz1 + b2 * dz2,
                      d[:, 0] + c1 * dz1 + c2 * dz2], axis=1)
-    # triangles in chunks of about CHUNK candidate pixels (each triangle's bounding box, clipped to the image)
-    ends = np.cumsum(count)
-    start = 0
-    while start < len(ids):
-        stop = max(int(np.searchsorted(ends, ends[start] - count[start] + CHUNK, side="right")), start + 1)
-        k = np.arange(start, stop)
-        start = stop
-        c = count[k]
-        local = np.repeat(np.arange(len(k)), c)
-        offset = np.arange(c.sum()) - np.repeat(np.cumsum(c) - c, c)
-        px = lo[k, 0][local] + offset % width[k][local]
-        py = lo[k, 1][local] + offset // width[k][local]
-        cf = coef[k][local]
-        x, y = px + 0.5, py + 0.5
-        l1 = cf[:, 0] * x + cf[:, 1] * y + cf[:, 2]
-        l2 = cf[:, 3] * x + cf[:, 4] * y + cf[:, 5]
-        inside = (l1 >= -1e-9) & (l2 >= -1e-9) & (l1 + l2 <= 1.0 + 1e-9)
-        z = (cf[:, 6] * x + cf[:, 7] * y + cf[:, 8])[inside]
-        pix, tri, l1, l2 = (py * W + px)[inside], ids[k][local][inside], l1[inside], l2[inside]
-        # the nearest fragment of each pixel in this chunk (stable: the lower triangle index first at a tie) ...
-        order = np.lexsort((-z, pix))
-        sorted_pix = pix[order]
-        first = order[np.r_[True, sorted_pix[1:] != sorted_pix[:-1]]]
-        # ... replaces the z-buffer's where it is strictly nearer (so earlier chunks win ties too)
-        pix = pix[first]
-        nearer = z[first] > zbuf[pix]
-        pix, first = pix[nearer], first[nearer]
-        zbuf[pix], tri_at[pix] = z[first], tri[first]
-        bary[pix] = np.stack([1.0 - l1[first] - l2[first], l1[first], l2[first]], axis=1)
+    # triangles grouped by the size of their bounding box, rounded up to one of BOX_SIZES (about 50 groups a view),
+    # so that a group's candidate pixels are an (n, h, w) array: no per-candidate gathers (twice as fast)
+    sizes = BOX_SIZES[: np.searchsorted(BOX_SIZES, ext.max()) + 1]
+    if ext.max() > sizes[-1]:
+        sizes = np.r_[sizes, ext.max()]
+    bw, bh = sizes[np.searchsorted(sizes, ext[:, 0])], sizes[np.searchsorted(sizes, ext[:, 1])]
+    order = np.lexsort((bh, bw))  # stable: by triangle index within a group
+    keys = bw[order] * (int(sizes[-1]) + 1) + bh[order]
+    bounds = np.r_[np.flatnonzero(np.r_[True, keys[1:] != keys[:-1]]), len(order)]
+    for g0, g1 in zip(bounds[:-1], bounds[1:]):
+        w, h = int(bw[order[g0]]), int(bh[order[g0]])
+        per = max(CHUNK // (w * h), 1)
+        for c0 in range(g0, g1, per):
+            m = order[c0:min(c0 + per, g1)]
+            cf = coef[m][:, :, None, None]
+            px = lo[m, 0][:, None, None] + np.arange(w)[None, None, :]
+            py = lo[m, 1][:, None, None] + np.arange(h)[None, :, None]
+            x, y = px + 0.5, py + 0.5
+            l1 = cf[:, 0] * x + cf[:, 1] * y + cf[:, 2]
+            l2 = cf[:, 3] * x + cf[:, 4] * y + cf[:, 5]
+            inside = (l1 >= -1e-9) & (l2 >= -1e-9) & (l1 + l2 <= 1.0 + 1e-9) & (px < W) & (py < H)
+            if not inside.any():
+                continue
+            z = (cf[:, 6] * x + cf[:, 7] * y + cf[:, 8])[inside]
+            pix = np.broadcast_to(py * W + px, inside.shape)[inside]
+            tri = np.broadcast_to(ids[m][:, None, None], inside.shape)[inside]
+            l1, l2 = l1[inside], l2[inside]
+            # the nearest fragment of each pixel in this chunk (the lower triangle index at a tie) ...
+            nearest = np.lexsort((tri, -z, pix))
+            sorted_pix = pix[nearest]
+            first = nearest[np.r_[True, sorted_pix[1:] != sorted_pix[:-1]]]
+            # ... replaces the z-buffer's where it is nearer (or as near, of a lower triangle index)
+            pix = pix[first]
+            nearer = (z[first] > zbuf[pix]) | ((z[first] == zbuf[pix]) & (tri[first] < tri_at[pix]))
+            pix, first = pix[nearer], first[nearer]
+            zbuf[pix], tri_at[pix] = z[first], tri[first]
+            bary[pix] = np.stack([1.0 - l1[first] - l2[first], l1[first], l2[first]], axis=1)
     return tri_at, bary, zbuf
 
 
