@@ -124,6 +124,9 @@ def test_the_nearest_surface_wins_at_each_pixel():
         tri, bary, z = rasterize(np.array(order), np.array(depth), (10, 10))
         assert tri[3 * 10 + 3] == order.index(near) and z[3 * 10 + 3] == 1.0
         np.testing.assert_allclose(bary[tri >= 0].sum(axis=1), 1.0)
+    # the same triangle twice at the same depth: the lower index wins at every pixel (deterministic)
+    tri, _, _ = rasterize(np.array([near, near]), np.ones((2, 3)), (10, 10))
+    assert set(tri[tri >= 0]) == {0} and (tri >= 0).sum() > 40
     # a sheet 5 cm in front of a sphere (+z): the cloth's colour in front, the sphere's from the back, whichever is
     # listed first; no pixel is drawn in the background's colours where both project
     x, tris = _grid(5, 0.3, 0.25)
@@ -157,6 +160,9 @@ def test_shading_is_smooth_across_a_coarse_curved_cloth():
     # two-sided: the inside, seen from the back, is lit as well (not left at the ambient term)
     inside = back.rgb[back.cloth].mean(axis=1)
     assert inside.max() > 0.8
+    # the same input draws the same pixels
+    again = render_views(x, tris, np.ones((14, 3)), (), views=VIEWS[:2], panel_px=200, max_width_px=400)
+    assert all(np.array_equal(a.rgb, b.rgb) for a, b in zip(again, (front, back)))
 
 
 def _scene(tmp_path) -> Path:
