@@ -13,10 +13,11 @@ perf/steps_per_s.
 
 What a user opens: the world is right-handed with Y up (logged once at "/"), and every recording of a cloth carries
 a default blueprint (the viewer's layout): the 3D view large, looking at the cloth from the front (+z) at a distance
-that frames it, the pattern's 2D view (origin /pattern) as a tab for garments, the strain colours' legend under it,
-and the plots grouped beside it (energy, strain, seam gap, speed, level, events). A garment's pattern pieces are
-entities of their own (<entity>/pieces/<piece>) until its seams merge, then one mesh (<entity>/mesh); the seams
-show as lines (<entity>/seams, every open pair) while they close; a body mesh is <entity>/body.
+that frames it as the still pictures' front view does (fit_distance), the pattern's 2D view (origin /pattern) as a
+tab for garments, the strain colours' legend under it, and the plots grouped beside it (energy, strain, seam gap,
+speed, level, events). A garment's pattern pieces are entities of their own (<entity>/pieces/<piece>) until its
+seams merge, then one mesh (<entity>/mesh); the seams show as lines (<entity>/seams, every open pair) while they
+close; a body mesh is <entity>/body.
 Open a recording with `rerun FILE.rrd`.
 """
 from __future__ import annotations
