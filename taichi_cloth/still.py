@@ -201,7 +201,7 @@ def render_views(cloth_x: np.ndarray, cloth_triangles: np.ndarray, cloth_rgb: np
     # the cloth lies a collision thickness (a few mm) off the body, but its flat triangles can cut the body's
     # tessellation where both curve: half an edge (at most 1 cm) toward the viewer keeps it in front there
     lift = min(0.5 * edge, 0.01)
-    # every mesh as corner arrays: points (N,3,3) [m], normals (N,3,3), albedo (N,3,3), specular weight (N,)
+    # every mesh as corner arrays: points (N,3,3) [m], unit normals (N,3,3), albedo (N,3,3) in 0..1, is a body
     cloth_n = vertex_normals(x, tris)
     meshes = [(x[tris], cloth_n[tris], rgb[tris], False)]
     for v, t in bodies:
