@@ -45,7 +45,8 @@ def add_run_arguments(p: argparse.ArgumentParser, frames_default=None) -> None:
     p.add_argument("--yes", action="store_true", help="run even when the run has more steps than the guard allows "
                    f"({MAX_STEPS:,}; the count and an estimated time are printed first)")
     p.add_argument("--png", action="store_true", help="also write still pictures beside the recording: NAME.png "
-                   "(the final drape, front and side, strain colours) and, for a garment, NAME-pattern.png")
+                   "(the final drape, front, back and side framed on the cloth, strain colours) and, for a garment, "
+                   "NAME-pattern.png")
     p.add_argument("--until-rest", action="store_true",
                    help="end the run at the first frame at which the cloth is at rest (the scene's [rest] criterion; "
                         "--frames is then the most it runs)")

@@ -13,10 +13,11 @@ perf/steps_per_s.
 
 What a user opens: the world is right-handed with Y up (logged once at "/"), and every recording of a cloth carries
 a default blueprint (the viewer's layout): the 3D view large, looking at the cloth from the front (+z) at a distance
-that frames it, the pattern's 2D view (origin /pattern) as a tab for garments, the strain colours' legend under it,
-and the plots grouped beside it (energy, strain, seam gap, speed, level, events). A garment's pattern pieces are
-entities of their own (<entity>/pieces/<piece>) until its seams merge, then one mesh (<entity>/mesh); the seams
-show as lines (<entity>/seams, every open pair) while they close; a body mesh is <entity>/body.
+that frames it as the still pictures' front view does (fit_distance), the pattern's 2D view (origin /pattern) as a
+tab for garments, the strain colours' legend under it, and the plots grouped beside it (energy, strain, seam gap,
+speed, level, events). A garment's pattern pieces are entities of their own (<entity>/pieces/<piece>) until its
+seams merge, then one mesh (<entity>/mesh); the seams show as lines (<entity>/seams, every open pair) while they
+close; a body mesh is <entity>/body.
 Open a recording with `rerun FILE.rrd`.
 """
 from __future__ import annotations
@@ -30,6 +31,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from .paths import free_path
+from .still import FRAME_MARGIN
 from .strain import strain_colormap, strain_colors
 
 #: the engine's world: right-handed, Y up (+z is the body's front)
@@ -67,12 +69,52 @@ class _Batch:
 @dataclass
 class _Shown:
     """What the blueprint shows of one cloth entity: its SceneLayout, and its box [m] at its last frame logged (the
-    translation applied), (3,) lo and hi, None before."""
+    translation applied), (3,) lo and hi, None before; points: that frame's (P,3) positions [m] (no translation)."""
 
     layout: object
     translation: np.ndarray
     lo: np.ndarray | None = None
     hi: np.ndarray | None = None
+    points: np.ndarray | None = None
+
+
+def _camera(center: np.ndarray, elevation: float, distance: float) -> tuple[np.ndarray, np.ndarray]:
+    """(eye (3,) [m], basis (3,3): rows right, up, forward) of the default 3D view's camera: `distance` [m] in
+    front (+z) of `center`, `elevation` [m] above it, looking at it, y up."""
+    eye = center + np.array([0.0, elevation, distance])
+    forward = (center - eye) / np.linalg.norm(center - eye)
+    right = np.cross(forward, [0.0, 1.0, 0.0])
+    right /= np.linalg.norm(right)
+    return eye, np.stack([right, np.cross(right, forward), forward])
+
+
+def fit_distance(points: np.ndarray, center: np.ndarray, elevation: float, pad: float) -> float:
+    """The least distance [m] in front (+z) of `center` (3,) [m] at which the default 3D view's camera (_camera;
+    CAMERA_FOV_Y high, VIEW_ASPECT wide) sees every one of `points` (N,3) [m] with `pad` [m] to spare around it at
+    its depth, as the still pictures' orthographic views frame the cloth (taichi_cloth.still.FRAME_MARGIN). Fitting
+    the points rather than the box's front face lets a garment fill the view: its widest part (the sleeves) lies
+    behind the front face, a quarter smaller there in perspective. Bisection: the fit holds from that distance on."""
+    tan_y = np.tan(np.radians(CAMERA_FOV_Y) / 2)
+    tan = np.array([tan_y * VIEW_ASPECT, tan_y])
+    x = np.asarray(points, np.float64).reshape(-1, 3)
+    x = x[np.isfinite(x).all(axis=1)]
+    if not len(x) or not np.isfinite(center).all():
+        return 1.0  # a cloth that blew up: any distance (the run says why)
+
+    def fits(distance: float) -> bool:
+        eye, basis = _camera(center, elevation, distance)
+        d = (x - eye) @ basis.T
+        return bool((d[:, 2] > 0).all() and ((np.abs(d[:, :2]) + pad) <= d[:, 2:] * tan).all())
+
+    near, far = 0.0, 1.0 + float(np.abs(x - center).max(initial=0.0)) / tan_y
+    for _ in range(60):
+        if fits(far):
+            break
+        far *= 2.0
+    for _ in range(40):  # to within 1e-12 of the far bound's first guess
+        mid = 0.5 * (near + far)
+        near, far = (near, mid) if fits(mid) else (mid, far)
+    return far
 
 
 def _path(*parts: str) -> str:
@@ -235,6 +277,7 @@ class Recorder:
             first = shown.lo is None
             x = np.asarray(frame.positions)
             shown.lo, shown.hi = x.min(axis=0) + shown.translation, x.max(axis=0) + shown.translation
+            shown.points = x
             if first:  # a layout from the start (kept if the run dies), framed anew at close() on the last frame
                 self._send_blueprint()
         self.frames_logged += 1
@@ -280,19 +323,21 @@ class Recorder:
             return
         box = (np.min([s.lo for s in framed], axis=0), np.max([s.hi for s in framed], axis=0))
         if self._framed is None or not all(np.allclose(a, b, atol=1e-3) for a, b in zip(box, self._framed)):
-            self.stream.send_blueprint(self._blueprint(*box))
+            points = np.concatenate([np.asarray(s.points, np.float64) + s.translation for s in framed])
+            self.stream.send_blueprint(self._blueprint(*box, points))
             self._framed = box
 
-    def _blueprint(self, lo: np.ndarray, hi: np.ndarray) -> rrb.Blueprint:
-        """The default layout: the 3D view (a camera in front (+z) framing the box lo..hi [m] of every cloth's
-        last frame: the viewer opens a recording at its end) with the pattern as a tab for garments and the strain
-        legend below, the grouped plots and the events beside it."""
+    def _blueprint(self, lo: np.ndarray, hi: np.ndarray, points: np.ndarray) -> rrb.Blueprint:
+        """The default layout: the 3D view (a camera in front (+z) of the box lo..hi [m] of every cloth's last frame,
+        looking at its centre, as near as it can be while it sees all of those frames' `points` (N,3) [m] with the
+        still pictures' margin: fit_distance; the viewer opens a recording at its end) with the pattern as a tab for
+        garments and the strain legend below, the grouped plots and the events beside it."""
         shown = self._shown
         center, size = 0.5 * (lo + hi), np.maximum(hi - lo, 0.05)
-        # the distance at which the box's front face fills the view (with a margin), from the front (+z)
-        half = 0.5 * max(size[1], size[0] / VIEW_ASPECT) * 1.25
-        distance = half / np.tan(np.radians(CAMERA_FOV_Y) / 2) + 0.5 * size[2]
-        eye = rrb.EyeControls3D(position=(center + [0.0, 0.1 * size[1], distance]).tolist(),
+        # a little from above; the margin of taichi_cloth.still: FRAME_MARGIN of the box's largest extent
+        elevation, pad = 0.1 * size[1], FRAME_MARGIN * float(size.max())
+        distance = fit_distance(points, center, elevation, pad)
+        eye = rrb.EyeControls3D(position=(center + [0.0, elevation, distance]).tolist(),
                                 look_target=center.tolist(), eye_up=[0.0, 1.0, 0.0])
         scene = rrb.Spatial3DView(name="scene", origin="/", eye_controls=eye,
                                   background=rrb.BackgroundKind.GradientDark,  # the white of no strain stands out

@@ -9,7 +9,8 @@ import rerun as rr
 from matplotlib.image import imread
 
 from taichi_cloth.frame import FrameSnapshot, SceneLayout
-from taichi_cloth.recorder import CAMERA_FOV_Y, Recorder
+from taichi_cloth.recorder import CAMERA_FOV_Y, VIEW_ASPECT, Recorder
+from taichi_cloth.still import FRAME_MARGIN
 from taichi_cloth.strain import STRAIN_STOPS, strain_colormap
 
 
@@ -93,14 +94,21 @@ def test_the_blueprint_lays_out_the_scene_the_pattern_the_legend_and_the_plots(g
     assert got["pattern"][:2] == ("2D", "/pattern") and got["strain colours"][:2] == ("2D", "/legend/strain")
     assert got["energy [J]"][:3] == ("TimeSeries", "/metrics", ["/metrics/cloth/energy/**"])
     assert got["events"][:3] == ("TextLog", "/", ["/cloth/events"])
-    # the camera: in front (+z) of the first frame's box (x 0..1, y 1..2, z -0.25..0.25), looking at its centre, y
-    # up, at a distance where the box's 1 m high front face fills between half and all of the view's height
+    # the camera: in front (+z) of the last frame's box (x 0..1, y 1..2, z -0.25..0.25), looking at its centre, y
+    # up, as near as it can be while every point of that frame lies inside the view with the still pictures'
+    # margin around it (FRAME_MARGIN of the box's largest extent, 1 m), as their front view frames it
     eye = got["scene"][3]
-    np.testing.assert_allclose(eye["EyeControls3D:look_target"][0][0], [0.5, 1.5, 0.0], atol=1e-6)
+    target = np.array(eye["EyeControls3D:look_target"][0][0])
+    np.testing.assert_allclose(target, [0.5, 1.5, 0.0], atol=1e-6)
     position = np.array(eye["EyeControls3D:position"][0][0])
-    assert abs(position[0] - 0.5) < 1e-6 and eye["EyeControls3D:eye_up"][0][0] == [0, 1, 0]
-    seen = 2 * (position[2] - 0.25) * np.tan(np.radians(CAMERA_FOV_Y / 2))  # the view's height at the front face
-    assert 1.0 < seen < 2.0
+    assert abs(position[0] - 0.5) < 1e-6 and position[2] > 0.25 and eye["EyeControls3D:eye_up"][0][0] == [0, 1, 0]
+    forward = (target - position) / np.linalg.norm(target - position)
+    right = np.cross(forward, [0.0, 1.0, 0.0])
+    right /= np.linalg.norm(right)
+    d = (two_pieces()[2].positions - position) @ np.stack([right, np.cross(right, forward), forward]).T
+    tan = np.tan(np.radians(CAMERA_FOV_Y / 2)) * np.array([VIEW_ASPECT, 1.0])
+    used = (np.abs(d[:, :2]) + FRAME_MARGIN * 1.0) / (d[:, 2:] * tan)  # 1: at the view's edge less the margin
+    assert used.max() == pytest.approx(1.0, abs=1e-4)
 
 
 def test_the_legend_shows_the_strain_colour_map_in_per_cent(garment_recording):
