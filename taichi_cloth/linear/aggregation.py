@@ -16,6 +16,12 @@ the diagonal and O_e = A~(a, b) per edge e = (a, b) (the cloth's springs, O_s = 
 Aggregation (host, once per topology): a greedy pass over the spring graph makes every particle whose neighbours are
 all free the root of an aggregate with them; a second pass adds each particle left to a neighbour's aggregate.
 
+The constraints in the coarse space (Tamstorf, Jones and McCormick 2015, section 4): level 0's prolongation is
+filtered, S_i T_i, so that a coarse correction never moves a pinned or held particle nor a sliding one along its
+normal, and the Galerkin blocks see S A S alone (the mass M' (I - S) that keeps A~ invertible on null(S) would
+otherwise tie every aggregate with a constrained member to it). The residuals the cycle restricts lie in range(S)
+(A~ and the smoother's blocks keep range(S) and null(S) apart), so the restriction needs no filter.
+
 The coarse space: a coarse vertex G (an aggregate) carries 6 unknowns, a translation t [m/s] and a small rotation
 theta [rad/s] about its centroid c_G (the mean position of its particles, from the CURRENT positions, recomputed in
 every prepare). Folding cloth's slow modes are local rotations, which piecewise-constant (translation-only)
@@ -208,6 +214,7 @@ class AggregationMultigrid:
         self.b = blk.vector(3, fp, P)             # right-hand side [kg m/s]
         self.x = blk.vector(3, fp, P)             # iterate [m/s]
         self.r = blk.vector(3, fp, P)             # residual [kg m/s]
+        self.proj = blk.matrix(3, 3, fp, P)       # the filter S_i: the prolongation is S_i T_i
         # the coarse levels: (t, theta) per vertex, so blocks mix [kg], [kg m] and [kg m^2]
         self.diag6 = blk.matrix(6, 6, fp, VC)     # Galerkin diagonal blocks
         self.dinv6 = blk.matrix(6, 6, fp, VC)     # the inverses of their regularised copies
@@ -422,7 +429,9 @@ class AggregationMultigrid:
         # the cloth: D_i = S_i (M' + sum B_s) S_i + M' (I - S_i), O_s = -S_a B_s S_b
         ti.loop_config(serialize=self.serial)
         for i in range(n0):
-            D = filtered_block(filt.projector(i), system.diagonal(i, ms), system.model.mass[i] * ms)
+            S = filt.projector(i)
+            D = filtered_block(S, system.diagonal(i, ms), system.model.mass[i] * ms)
+            self.proj[i] = S
             self.diag[i] = D
             self.dinv[i] = D.inverse()
         ti.loop_config(serialize=self.serial)
@@ -459,8 +468,9 @@ class AggregationMultigrid:
                 for e in range(self.mem_ptr[g], self.mem_ptr[g + 1]):
                     m = self.mem[e]
                     W = cross_matrix(self.arm[m])
-                    if ti.static(l == 1):
-                        D += fine_galerkin(self.fp, self.diag[m], W, W)
+                    if ti.static(l == 1):  # (S T)^T A~ (S T) = T^T S D S T: the mass on null(S) drops out
+                        S = self.proj[m]
+                        D += fine_galerkin(self.fp, S @ self.diag[m] @ S, W, W)
                     else:
                         D += coarse_galerkin(self.fp, self.diag6[m - n0], W, W)
                 for e in range(self.in_ptr[g], self.in_ptr[g + 1]):
@@ -604,8 +614,8 @@ class AggregationMultigrid:
         ti.loop_config(serialize=self.serial)
         for g in range(h0):
             xc = self.x6[self.agg[g] - n0]
-            self.x[g] += ti.Vector([xc[0], xc[1], xc[2]], self.fp) + ti.Vector([xc[3], xc[4], xc[5]],
-                                                                               self.fp).cross(self.arm[g])
+            v = ti.Vector([xc[0], xc[1], xc[2]], self.fp) + ti.Vector([xc[3], xc[4], xc[5]], self.fp).cross(self.arm[g])
+            self.x[g] += self.proj[g] @ v
         self._smooth(0, h0, False)
         ti.loop_config(serialize=self.serial)
         for i in range(n0):
