@@ -39,18 +39,13 @@ from clothbase.fields import FieldBlock
 from ..linear import PCG, PRECONDITIONERS, BlockSystem, ConstraintFilter, PreconditionerPolicy
 from .base import Integrator, Option, at_least_one, one_of, positive
 
-#: standard gravity [m/s^2]: g h is the velocity scale of CG's stopping test (linear.pcg)
-G = 9.81
-
 
 @ti.data_oriented
 class Implicit(Integrator):
     name = "implicit"
     unconditionally_stable = True
     OPTIONS = {
-        "cg_tolerance": Option(float, 1e-3, "CG stops when the mass-weighted RMS velocity error (preconditioned "
-                               "residual norm) is below this fraction of g h, the velocity gravity gives in one step "
-                               "(g = 9.81 m/s^2 whether gravity is on or not)", positive),
+        "cg_tolerance": Option(float, 1e-3, "relative CG residual (preconditioned norm) to stop at", positive),
         "cg_max_iterations": Option(int, 200, "CG iteration cap per step, shared by its Newton iterations",
                                     at_least_one),
         "preconditioner": Option(str, "auto", "jacobi | multigrid (V-cycles over the cloth's 4-8 levels, or over "
@@ -89,7 +84,7 @@ class Implicit(Integrator):
         self.cut = blk.scalar(ti.i32, ())             # line-search cuts in this step
         blk.finalize(self)
         self.stats = {"cg_iterations": 0, "cg_unconverged_steps": 0, "newton_iterations": 0, "line_search_cuts": 0}
-        self.last_residual = 0.0  # sqrt(r.Pr / sum m) / (g h) at the end of the last step (cg_tolerance's measure)
+        self.last_residual = 0.0  # sqrt(r.Pr / b.Pb) at the end of the last step
         self._warned_cap = False
         # Jacobi-PCG starts from the previous step's dv: it carries over the smooth part Jacobi is slow to find;
         # multigrid finds it itself and starts from 0. On a drape at rest the carried-over dv can keep a flutter
@@ -142,10 +137,10 @@ class Implicit(Integrator):
             self._assemble(dt, self.system.h_gamma, int(k == 0))
             preconditioner = self.policy.current
             preconditioner.prepare(self.system, self.filter)
-            self.pcg.solve(self.system, self.filter, preconditioner, tolerance, budget - its, G * dt)
+            self.pcg.solve(self.system, self.filter, preconditioner, tolerance, budget - its)
             # the line search returns what the host needs of this iteration: one read per Newton iteration
-            it, rz, rz_ref, decrement, rise = self._line_search(dt, int(self.options["line_search"]))
-            residual = math.sqrt(max(rz, 0.0) / rz_ref) if rz_ref > 0 else 0.0
+            it, rz, rz_b, decrement, rise = self._line_search(dt, int(self.options["line_search"]))
+            residual = math.sqrt(max(rz, 0.0) / rz_b) if rz_b > 0 else 0.0
             its += int(it)
             unconverged += int(residual > self.options["cg_tolerance"])
             self.stats["newton_iterations"] += 1
@@ -328,7 +323,7 @@ class Implicit(Integrator):
         ones only when it fails (in the same launch). IP and the total energy E (kinetic + spring + gravity) of every
         candidate are summed in float64 over the free particles and every spring, with the state still at the
         iterate (its spring directions, its external forces). Returns (CG iterations, the residual's
-        measure r.z at CG's last look, its reference r.z_ref, the Newton decrement [J], the rise of E above the
+        measure r.z at CG's last look, b.z_b, the Newton decrement [J], the rise of E above the
         step's start [J])."""
         m, s, fm = self.model, self.state, self.forces
         A = ti.static(self.ALPHAS)
@@ -389,7 +384,7 @@ class Implicit(Integrator):
             if m.inv_mass[i] != 0:
                 self.dv_total[i] += ti.cast(alpha, m.fp) * self.dv[i]
         cg = self.pcg
-        return ti.Vector([ti.cast(cg.iterations[None], ti.f64), cg.rz[None], cg.rz_ref[None], decrement, rise], ti.f64)
+        return ti.Vector([ti.cast(cg.iterations[None], ti.f64), cg.rz[None], cg.rz_b[None], decrement, rise], ti.f64)
 
     @ti.kernel
     def _finish(self, dt: ti.f64):

@@ -13,7 +13,7 @@ policy that picks one.
 A Preconditioner is built once at the model's capacity and, per system, `prepare(system, filt)`; then CG calls
 `apply(r, z)` (z = P r on (P,) vec3 fields) once per iteration, or, where `inline` is True, evaluates its Taichi
 function `precondition(i, r)` inside its own kernels. `warm_start` says whether CG may start from the last step's
-solution (the V-cycles start from 0); `detail` names it for the run summary.
+solution (the V-cycles start from 0, where r = b gives b.z_b for free); `detail` names it for the run summary.
 """
 from typing import Protocol
 

@@ -19,8 +19,7 @@ all free the root of an aggregate with them; a second pass adds each particle le
 The constraints in the coarse space (Tamstorf, Jones and McCormick 2015, section 4): level 0's prolongation is
 filtered, S_i T_i, so that a coarse correction never moves a pinned or held particle nor a sliding one along its
 normal, and the Galerkin blocks see S A S alone (the mass M' (I - S) that keeps A~ invertible on null(S) would
-otherwise tie every aggregate with a constrained member to it). The residuals the cycle restricts lie in range(S)
-(A~ and the smoother's blocks keep range(S) and null(S) apart), so the restriction needs no filter.
+otherwise tie every aggregate with a constrained member to it). The restriction is its transpose, T_i^T S_i.
 
 The coarse space: a coarse vertex G (an aggregate) carries 6 unknowns, a translation t [m/s] and a small rotation
 theta [rad/s] about its centroid c_G (the mean position of its particles, from the CURRENT positions, recomputed in
@@ -58,6 +57,7 @@ import taichi as ti
 
 from clothbase.fields import FieldBlock
 
+from ..cloth import SpringKind
 from ..model import csr
 from .dense import cholesky, cholesky_solve
 from .system import filtered_block, spring_block
@@ -252,9 +252,11 @@ class AggregationMultigrid:
         self.edge_counts: list[int] = []
 
     # ------------------------------------------------------------------ host side
-    def rebuild(self, springs: np.ndarray, n_particles: int) -> None:
+    def rebuild(self, springs: np.ndarray, n_particles: int, kinds: np.ndarray | None = None) -> None:
         """Aggregate the cloth whose (S, 2) spring ends (particle indices) are `springs`, and load the level tables.
-        Raises ValueError when the cloth exceeds the capacity or aggregation stalls above COARSE_MAX vertices."""
+        kinds: the (S,) SpringKind of every spring; where given, the cloth's particles are grouped along its
+        structural and seam springs only (every spring still couples the coarse vertices). Raises ValueError when
+        the cloth exceeds the capacity or aggregation stalls above COARSE_MAX vertices."""
         P, S = self.capacity
         ends = np.asarray(springs, np.int64).reshape(-1, 2)
         n = int(n_particles)
@@ -265,7 +267,14 @@ class AggregationMultigrid:
             raise ValueError("the aggregation multigrid needs at least one particle")
         sizes, edges, aggs = [n], [ends], []
         while sizes[-1] > COARSE_TARGET and len(sizes) < MAX_LEVELS:
-            agg = aggregate(sizes[-1], edges[-1])
+            group = edges[-1]
+            if len(sizes) == 1 and kinds is not None:
+                # grouped over the bending and shear springs too, an aggregate spans two spacings each way and
+                # bends inside, which its rigid motions cannot follow: smaller aggregates of the nearest neighbours
+                # (docs/performance.md, preconditioners)
+                kinds = np.asarray(kinds).reshape(-1)
+                group = ends[(kinds == int(SpringKind.STRUCTURAL)) | (kinds == int(SpringKind.SEAM))]
+            agg = aggregate(sizes[-1], group)
             nc = int(agg.max()) + 1
             if 2 * nc > sizes[-1]:  # stalls: fewer than two vertices per aggregate
                 break
@@ -556,7 +565,7 @@ class AggregationMultigrid:
             acc = ti.Vector.zero(self.fp, 6)
             for e in range(self.mem_ptr[g], self.mem_ptr[g + 1]):
                 m = self.mem[e]
-                f = self.r[m]
+                f = self.proj[m] @ self.r[m]  # (S T)^T r: the transpose of the prolongation, as CG needs
                 tq = self.arm[m].cross(f)
                 acc += ti.Vector([f[0], f[1], f[2], tq[0], tq[1], tq[2]], self.fp)
             self.b6[g - n0] = acc

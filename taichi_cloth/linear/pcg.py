@@ -4,16 +4,9 @@ goes on, once per launch.
 
 The preconditioner is either inline (`inline = True`: a Taichi function `precondition(i, r)` evaluated inside the
 CG kernels, CHUNK iterations unrolled per launch) or applied by its own kernels (`apply(r, z)` once per iteration,
-then one CG kernel); the iteration is the same: z = S P(r), stop when r.z <= tolerance^2 r.z_ref or at the cap,
-else p = z + beta p, q = S A p, x += alpha p, r -= alpha q.
-
-The stopping test is physically scaled: r.z_ref = sum over the free particles of m_i * scale^2, with the caller's
-velocity scale [m/s] (the implicit step: g h, the velocity gravity gives in one step), so that CG stops when the
-mass-weighted RMS velocity error sqrt(r.z / sum m) is below tolerance * scale (r.z ~ e^T A e for the error e, and A
-is the mass plus the springs' terms: the test also weighs the error of a stiff region by its stiffness). A test
-relative to the right-hand side, sqrt(r.z / b.z_b), let one stretched region (a garment's neckline held at the
-strain limit, almost all of b) set the accuracy of the whole cloth: figures in docs/performance.md,
-preconditioners.
+then one CG kernel); the iteration is the same: z = S P(r), stop when sqrt(r.z / b.z_b) <= tolerance or at the cap
+(z_b the preconditioned b, so that a good start stops early), else p = z + beta p, q = S A p, x += alpha p,
+r -= alpha q. A preconditioner applied by kernels starts from x = 0, where r = b: its first look gives b.z_b.
 """
 
 import taichi as ti
@@ -27,9 +20,8 @@ class PCG:
 
     b, x, r, z, p, q: (P,) vec3 fields of the model's precision: the right-hand side [kg m/s], the solution and
     start [m/s] (the caller writes both), the residual, the preconditioned residual, the direction and A p.
-    The scalars, kept on the device: rz = r.z of the last look, rz_ref = sum of the free masses times scale^2
-    [kg m^2/s^2], threshold = tolerance^2 rz_ref and beta (0-d float64 fields); active (1 while iterating),
-    iterations and max_iterations (0-d int32 fields).
+    The scalars, kept on the device: rz = r.z of the last look, rz_b = b.z_b, threshold = tolerance^2 rz_b and beta
+    (0-d float64 fields); active (1 while iterating), iterations and max_iterations (0-d int32 fields).
     """
 
     #: CG iterations unrolled into one kernel launch with an inline preconditioner; iterations past convergence
@@ -41,16 +33,15 @@ class PCG:
         fp, P = model.fp, model.capacity[0]
         blk = FieldBlock()
         self.b, self.x, self.r, self.z, self.p, self.q = (blk.vector(3, fp, P) for _ in range(6))
-        self.rz, self.rz_ref, self.threshold, self.beta = (blk.scalar(ti.f64, ()) for _ in range(4))
+        self.rz, self.rz_b, self.threshold, self.beta = (blk.scalar(ti.f64, ()) for _ in range(4))
         self.active, self.iterations, self.max_iterations = (blk.scalar(ti.i32, ()) for _ in range(3))
         blk.finalize(self)
 
-    def solve(self, system, filt, preconditioner, tolerance: float, max_iterations: int, scale: float) -> None:
+    def solve(self, system, filt, preconditioner, tolerance: float, max_iterations: int) -> None:
         """x = the CG solution of S A S x = S b from the start in x, with `system` (linear.BlockSystem), `filt`
-        (linear.ConstraintFilter) and a prepared `preconditioner`, to the mass-weighted RMS velocity error
-        tolerance * scale [m/s] (see the module docstring); iterations, rz and rz_ref stay on the device."""
+        (linear.ConstraintFilter) and a prepared `preconditioner`; iterations, rz and rz_b stay on the device."""
         tol2 = tolerance * tolerance
-        self._start(system, filt, preconditioner, tol2, scale * scale, max_iterations)
+        self._start(system, filt, preconditioner, tol2, max_iterations)
         if preconditioner.inline:
             while self._iterate(system, filt, preconditioner, self.CHUNK, 0, tol2):
                 pass
@@ -64,8 +55,10 @@ class PCG:
 
     @ti.func
     def _look(self, rz, first, tol2):
-        """The test on r.z of the current residual (first: the start): stop, or beta for the next p."""
+        """The test on r.z of the current residual (first: the start, r = b): stop, or beta for the next p."""
         if first != 0:
+            self.rz_b[None] = rz
+            self.threshold[None] = tol2 * rz
             self.active[None] = ti.select(rz > self.threshold[None] and self.max_iterations[None] > 0, 1, 0)
             self.rz[None] = rz
         elif self.active[None] != 0:
@@ -78,16 +71,15 @@ class PCG:
             self.rz[None] = rz
 
     @ti.kernel
-    def _start(self, system: ti.template(), filt: ti.template(), pre: ti.template(), tol2: ti.f64, scale2: ti.f64,
+    def _start(self, system: ti.template(), filt: ti.template(), pre: ti.template(), tol2: ti.f64,
                max_iterations: ti.i32):
-        """r = S (b - A x), r.z_ref and the threshold; with an inline preconditioner also z, r.z and the first
-        look."""
+        """r = S (b - A x); with an inline preconditioner also z, r.z, b.z_b and the first look."""
         m = self.model
         self.iterations[None] = 0
         self.beta[None] = 0.0
         self.max_iterations[None] = max_iterations
         rz = ti.cast(0.0, ti.f64)
-        mass = ti.cast(0.0, ti.f64)
+        bz = ti.cast(0.0, ti.f64)
         ti.loop_config(serialize=m.serial)
         for i in range(m.n_particles[None]):
             zero = ti.Vector.zero(m.fp, 3)
@@ -101,12 +93,12 @@ class PCG:
                     z = filt.apply(i, pre.precondition(i, r))
                     self.z[i] = z
                     rz += ti.cast(r.dot(z), ti.f64)
-                mass += ti.cast(m.mass[i], ti.f64)
-        self.rz_ref[None] = mass * scale2
-        self.threshold[None] = tol2 * mass * scale2
+                    bz += ti.cast(self.b[i].dot(filt.apply(i, pre.precondition(i, self.b[i]))), ti.f64)
         if ti.static(pre.inline):
+            self.rz_b[None] = bz
+            self.threshold[None] = tol2 * bz
             self.rz[None] = rz
-            self.active[None] = ti.select(rz > tol2 * mass * scale2 and max_iterations > 0, 1, 0)
+            self.active[None] = ti.select(rz > tol2 * bz and max_iterations > 0, 1, 0)
 
     @ti.kernel
     def _iterate(self, system: ti.template(), filt: ti.template(), pre: ti.template(), n: ti.template(),

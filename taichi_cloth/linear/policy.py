@@ -105,7 +105,7 @@ class PreconditionerPolicy:
             if self.apart is None:
                 self.apart = AggregationMultigrid(self.model.capacity[:2], fp=self.model.fp,
                                                   serial=ti.lang.impl.current_cfg().arch == ti.cpu)
-            self.apart.rebuild(self.model.data.springs, self.model.data.n_particles)
+            self.apart.rebuild(self.model.data.springs, self.model.data.n_particles, self.model.data.kind)
             return self.apart
         except ValueError as err:
             self.apart_failed = str(err)
