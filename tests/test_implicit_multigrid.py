@@ -162,10 +162,11 @@ def test_the_scene_picks_the_preconditioner_the_cloth_allows_and_says_which():
     assert "Jacobi-preconditioned CG" in grid.run(0, progress=False).format()
     big = tc.Scene(tc.ClothBuilder.grid((1.0, 1.0), (45, 45)), dt=H)  # 2,025 particles: auto aggregates
     assert isinstance(big.integrator.policy.current, AggregationMultigrid)
-    assert big.integrator.detail.startswith("CG preconditioned by V-cycles over 4 aggregation levels (2025 > ")
+    assert big.integrator.detail.startswith("CG preconditioned by V-cycles over ")
+    assert "aggregation levels (2025 > " in big.integrator.detail
     asked = tc.Scene(tc.ClothBuilder.grid((0.5, 0.5), (6, 6)), dt=H, integrator_options={"preconditioner": "multigrid"})
     assert isinstance(asked.integrator.policy.current, AggregationMultigrid)
-    assert "V-cycles over 2 aggregation levels (36 > 4)" in asked.run(0, progress=False).format()
+    assert "V-cycles over 2 aggregation levels (36 > 8)" in asked.run(0, progress=False).format()
     # 300 loose threads of one spring each: aggregated into 300 single vertices that do not coarsen further
     x = np.stack([np.repeat(np.arange(300) * 0.02, 2), np.zeros(600), np.tile([0.0, 0.01], 300)], 1)
     pairs = np.arange(600).reshape(300, 2)

@@ -361,8 +361,12 @@ class AggregationMultigrid:
     def prepare(self, system, filt) -> None:
         """Once per Newton system: the level operators of A~ from the system's diagonal blocks and spring blocks
         (linear.BlockSystem), its particles' positions (system.x, for the rotations' lever arms) and the filter S
-        (linear.ConstraintFilter). One kernel launch."""
+        (linear.ConstraintFilter). A kernel launch per coarse level and one for the coarsest factor (one kernel
+        for all levels took minutes to compile: the 6x6 block products unrolled once per level)."""
         self._prepare(system, filt)
+        for level in range(2, len(self.sizes)):
+            self._prepare_coarse(system, level)
+        self._factor()
 
     def apply(self, r, z) -> None:
         """z = V-cycle(r): r, z are (P,) vec3 fields of the cloth [kg m/s], [m/s]. One kernel launch."""
@@ -428,13 +432,78 @@ class AggregationMultigrid:
             for g in range(lo, hi):
                 self.x6[g - n0] += w * (self.dinv6[g - n0] @ self.r6[g - n0])
 
+    @ti.func
+    def _coarse_level(self, system: ti.template(), l, first: ti.template()):
+        """Level l (a runtime value; first: l = 1, made from the cloth) from the one above: the aggregates'
+        centroids and their members' lever arms, then the Galerkin blocks and the smoother's inverses."""
+        nl = self.n_levels[None]
+        n0, e0 = self.vbound[1], self.ebound[1]
+        eps = ti.static(REGULARISATION)
+        ti.loop_config(serialize=self.serial)
+        for g in range(self.vbound[l], self.vbound[l + 1]):
+            c = ti.Vector.zero(self.fp, 3)
+            w = ti.cast(0.0, self.fp)
+            for e in range(self.mem_ptr[g], self.mem_ptr[g + 1]):
+                m = self.mem[e]
+                if ti.static(first):
+                    c += ti.cast(system.x[m], self.fp)
+                    w += 1.0
+                else:
+                    c += self.count[m - n0] * self.centre[m - n0]
+                    w += self.count[m - n0]
+            self.centre[g - n0] = c / w
+            self.count[g - n0] = w
+        hi = ti.select(l < nl, self.vbound[l], self.vbound[l - 1])  # the level above, when it has aggregates
+        ti.loop_config(serialize=self.serial)
+        for i in range(self.vbound[l - 1], hi):
+            if ti.static(first):
+                self.arm[i] = ti.cast(system.x[i], self.fp) - self.centre[self.agg[i] - n0]
+            else:
+                self.arm[i] = self.centre[i - n0] - self.centre[self.agg[i] - n0]
+        ti.loop_config(serialize=self.serial)
+        for g in range(self.vbound[l], self.vbound[l + 1]):
+            D = ti.Matrix.zero(self.fp, 6, 6)
+            for e in range(self.mem_ptr[g], self.mem_ptr[g + 1]):
+                m = self.mem[e]
+                W = cross_matrix(self.arm[m])
+                if ti.static(first):  # (S T)^T A~ (S T) = T^T S D S T: the mass on null(S) drops out
+                    S = self.proj[m]
+                    D += fine_galerkin(self.fp, S @ self.diag[m] @ S, W, W)
+                else:
+                    D += coarse_galerkin(self.fp, self.diag6[m - n0], W, W)
+            for e in range(self.in_ptr[g], self.in_ptr[g + 1]):
+                q = self.inner[e]
+                Wa, Wb = cross_matrix(self.arm[self.end_a[q]]), cross_matrix(self.arm[self.end_b[q]])
+                X = ti.Matrix.zero(self.fp, 6, 6)
+                if ti.static(first):
+                    X = fine_galerkin(self.fp, self.off[q], Wa, Wb)
+                else:
+                    X = coarse_galerkin(self.fp, self.off6[q - e0], Wa, Wb)
+                D += X + X.transpose()
+            self.diag6[g - n0] = D
+            self.dinv6[g - n0] = ti.cast(spd_inverse6(regularised(ti.cast(D, ti.f64), eps)), self.fp)
+        ti.loop_config(serialize=self.serial)
+        for k in range(self.ebound[l], self.ebound[l + 1]):
+            O = ti.Matrix.zero(self.fp, 6, 6)
+            for e in range(self.ce_ptr[k], self.ce_ptr[k + 1]):
+                q = self.ce[e]
+                Wa, Wb = cross_matrix(self.arm[self.end_a[q]]), cross_matrix(self.arm[self.end_b[q]])
+                X = ti.Matrix.zero(self.fp, 6, 6)
+                if ti.static(first):
+                    X = fine_galerkin(self.fp, self.off[q], Wa, Wb)
+                else:
+                    X = coarse_galerkin(self.fp, self.off6[q - e0], Wa, Wb)
+                if self.ce_flip[e] != 0:
+                    O += X.transpose()
+                else:
+                    O += X
+            self.off6[k - e0] = O
+
     # ------------------------------------------------------------------ the kernels
     @ti.kernel
     def _prepare(self, system: ti.template(), filt: ti.template()):
         ms = system.mass_scale[None]
-        nl = self.n_levels[None]
         n0, e0 = self.vbound[1], self.ebound[1]
-        eps = ti.static(REGULARISATION)
         # the cloth: D_i = S_i (M' + sum B_s) S_i + M' (I - S_i), O_s = -S_a B_s S_b
         ti.loop_config(serialize=self.serial)
         for i in range(n0):
@@ -447,68 +516,18 @@ class AggregationMultigrid:
         for q in range(e0):
             B = spring_block(system.u[q], system.axial[q], system.iso[q])
             self.off[q] = -(filt.projector(self.end_a[q]) @ B @ filt.projector(self.end_b[q]))
-        # the coarse levels, each from the one above: the aggregates' centroids and their members' lever arms, then
-        # the Galerkin blocks
-        for l in ti.static(range(1, MAX_LEVELS)):
-            ti.loop_config(serialize=self.serial)
-            for g in range(self.vbound[l], self.vbound[l + 1]):
-                c = ti.Vector.zero(self.fp, 3)
-                w = ti.cast(0.0, self.fp)
-                for e in range(self.mem_ptr[g], self.mem_ptr[g + 1]):
-                    m = self.mem[e]
-                    if ti.static(l == 1):
-                        c += ti.cast(system.x[m], self.fp)
-                        w += 1.0
-                    else:
-                        c += self.count[m - n0] * self.centre[m - n0]
-                        w += self.count[m - n0]
-                self.centre[g - n0] = c / w
-                self.count[g - n0] = w
-            hi = ti.select(l < nl, self.vbound[l], self.vbound[l - 1])  # the level above, when it has aggregates
-            ti.loop_config(serialize=self.serial)
-            for i in range(self.vbound[l - 1], hi):
-                if ti.static(l == 1):
-                    self.arm[i] = ti.cast(system.x[i], self.fp) - self.centre[self.agg[i] - n0]
-                else:
-                    self.arm[i] = self.centre[i - n0] - self.centre[self.agg[i] - n0]
-            ti.loop_config(serialize=self.serial)
-            for g in range(self.vbound[l], self.vbound[l + 1]):
-                D = ti.Matrix.zero(self.fp, 6, 6)
-                for e in range(self.mem_ptr[g], self.mem_ptr[g + 1]):
-                    m = self.mem[e]
-                    W = cross_matrix(self.arm[m])
-                    if ti.static(l == 1):  # (S T)^T A~ (S T) = T^T S D S T: the mass on null(S) drops out
-                        S = self.proj[m]
-                        D += fine_galerkin(self.fp, S @ self.diag[m] @ S, W, W)
-                    else:
-                        D += coarse_galerkin(self.fp, self.diag6[m - n0], W, W)
-                for e in range(self.in_ptr[g], self.in_ptr[g + 1]):
-                    q = self.inner[e]
-                    Wa, Wb = cross_matrix(self.arm[self.end_a[q]]), cross_matrix(self.arm[self.end_b[q]])
-                    X = ti.Matrix.zero(self.fp, 6, 6)
-                    if ti.static(l == 1):
-                        X = fine_galerkin(self.fp, self.off[q], Wa, Wb)
-                    else:
-                        X = coarse_galerkin(self.fp, self.off6[q - e0], Wa, Wb)
-                    D += X + X.transpose()
-                self.diag6[g - n0] = D
-                self.dinv6[g - n0] = ti.cast(spd_inverse6(regularised(ti.cast(D, ti.f64), eps)), self.fp)
-            ti.loop_config(serialize=self.serial)
-            for k in range(self.ebound[l], self.ebound[l + 1]):
-                O = ti.Matrix.zero(self.fp, 6, 6)
-                for e in range(self.ce_ptr[k], self.ce_ptr[k + 1]):
-                    q = self.ce[e]
-                    Wa, Wb = cross_matrix(self.arm[self.end_a[q]]), cross_matrix(self.arm[self.end_b[q]])
-                    X = ti.Matrix.zero(self.fp, 6, 6)
-                    if ti.static(l == 1):
-                        X = fine_galerkin(self.fp, self.off[q], Wa, Wb)
-                    else:
-                        X = coarse_galerkin(self.fp, self.off6[q - e0], Wa, Wb)
-                    if self.ce_flip[e] != 0:
-                        O += X.transpose()
-                    else:
-                        O += X
-                self.off6[k - e0] = O
+        # level 1 from the cloth (the deeper levels: _prepare_coarse, one launch each)
+        self._coarse_level(system, 1, True)
+
+    @ti.kernel
+    def _prepare_coarse(self, system: ti.template(), l: ti.i32):
+        self._coarse_level(system, l, False)
+
+    @ti.kernel
+    def _factor(self):
+        nl = self.n_levels[None]
+        n0, e0 = self.vbound[1], self.ebound[1]
+        eps = ti.static(REGULARISATION)
         # the coarsest level: assembled densely (regularised as the module docstring says) and factored L L^T in one
         # thread; 3 unknowns per vertex when it is the cloth itself, else 6
         ti.loop_config(serialize=True)
