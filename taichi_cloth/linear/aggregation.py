@@ -250,6 +250,7 @@ class AggregationMultigrid:
         self.weight[None] = float(omega)
         self.sizes: list[int] = []
         self.edge_counts: list[int] = []
+        self._coarse_compiled = False
 
     # ------------------------------------------------------------------ host side
     def rebuild(self, springs: np.ndarray, n_particles: int, kinds: np.ndarray | None = None) -> None:
@@ -366,6 +367,11 @@ class AggregationMultigrid:
         self._prepare(system, filt)
         for level in range(2, len(self.sizes)):
             self._prepare_coarse(system, level)
+        if not self._coarse_compiled and len(self.sizes) < 3:
+            # compiled now, on a level with no vertices (the one past the coarsest), not at a later rebuild that
+            # makes a third level: a seam merge or a level switch compiles nothing
+            self._prepare_coarse(system, len(self.sizes))
+        self._coarse_compiled = True
         self._factor()
 
     def apply(self, r, z) -> None:
