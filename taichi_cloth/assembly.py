@@ -261,7 +261,7 @@ def _attach_levels(stepper, source: _Source, multilevel, notes: list) -> None:
         why = "needs the nested levels of global refinement, not refine = local"
     garment = source.garment is not None
     nested = None if why else NestedLevels(ml.hierarchy.levels, ml.levels, None if garment else ml.start_level, garment)
-    note = stepper.attach_levels(nested, why)
+    note = stepper.attach_levels(nested, why, garment=garment)
     if note:
         notes.append(note)
 

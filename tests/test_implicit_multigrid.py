@@ -162,10 +162,11 @@ def test_the_scene_picks_the_preconditioner_the_cloth_allows_and_says_which():
     assert "Jacobi-preconditioned CG" in grid.run(0, progress=False).format()
     big = tc.Scene(tc.ClothBuilder.grid((1.0, 1.0), (45, 45)), dt=H)  # 2,025 particles: auto aggregates
     assert isinstance(big.integrator.policy.current, AggregationMultigrid)
-    assert big.integrator.detail.startswith("CG preconditioned by V-cycles over 3 aggregation levels (2025 > ")
+    assert big.integrator.detail.startswith("CG preconditioned by V-cycles over ")
+    assert "aggregation levels (2025 > " in big.integrator.detail
     asked = tc.Scene(tc.ClothBuilder.grid((0.5, 0.5), (6, 6)), dt=H, integrator_options={"preconditioner": "multigrid"})
     assert isinstance(asked.integrator.policy.current, AggregationMultigrid)
-    assert "V-cycles over 2 aggregation levels (36 > 4)" in asked.run(0, progress=False).format()
+    assert "V-cycles over 2 aggregation levels (36 > 8)" in asked.run(0, progress=False).format()
     # 300 loose threads of one spring each: aggregated into 300 single vertices that do not coarsen further
     x = np.stack([np.repeat(np.arange(300) * 0.02, 2), np.zeros(600), np.tile([0.0, 0.01], 300)], 1)
     pairs = np.arange(600).reshape(300, 2)
@@ -239,8 +240,9 @@ def test_a_step_of_a_sewn_garment_equals_the_direct_solve(preconditioner):
 
 def test_an_aggregation_v_cycle_is_symmetric_and_positive_and_its_levels_are_galerkin():
     """The aggregation cycle is the symmetric positive definite operator CG needs, and every coarse level is
-    P^T A~ P of the level above (P the aggregates' piecewise-constant prolongation): checked on the sewn pair
-    against the blocks of the filtered operator A~ = S A S + M' (I - S) built here."""
+    P^T A~ P of the level above (P the aggregates' rigid-body prolongation: level 0's S_i [I, -[x_i - c]_x], a coarse
+    vertex's [[I, -[c_G - c_K]_x], [0, I]]): checked on the sewn pair against the blocks of the filtered operator
+    A~ = S A S + M' (I - S) built here."""
     sc = sewn_pair_on_a_ball("multigrid")
     integ = sc.integrator
     mg = integ.policy.current
@@ -251,18 +253,7 @@ def test_an_aggregation_v_cycle_is_symmetric_and_positive_and_its_levels_are_gal
     assert_symmetric_positive(mg, np.random.default_rng(7), np.ones(n, bool))  # every row: A~ has no zero rows
 
     def dense(level):
-        lo, hi = mg.vbound.to_numpy()[level:level + 2]
-        elo, ehi = mg.ebound.to_numpy()[level:level + 2]
-        A = np.zeros((3 * (hi - lo), 3 * (hi - lo)))
-        diag, off = mg.diag.to_numpy(), mg.off.to_numpy()
-        ea, eb = mg.end_a.to_numpy() - lo, mg.end_b.to_numpy() - lo
-        for g in range(hi - lo):
-            A[3 * g:3 * g + 3, 3 * g:3 * g + 3] = diag[lo + g]
-        for q in range(elo, ehi):
-            a, b = ea[q], eb[q]
-            A[3 * a:3 * a + 3, 3 * b:3 * b + 3] += off[q]
-            A[3 * b:3 * b + 3, 3 * a:3 * a + 3] += off[q].T
-        return A
+        return dense_level(mg, level)
 
     # level 0 is A~ of the formulas
     d, x = sc.model.data, sc.positions()
@@ -279,15 +270,53 @@ def test_an_aggregation_v_cycle_is_symmetric_and_positive_and_its_levels_are_gal
     M = np.diag(np.repeat(d.mass, 3) * (1 + H * GAMMA))
     At = S @ A @ S + M @ (np.eye(3 * n) - S)
     np.testing.assert_allclose(dense(0), At, rtol=0, atol=1e-12 * np.abs(At).max())
-    agg = mg.agg.to_numpy()
-    vb = mg.vbound.to_numpy()
     for level in range(1, len(mg.sizes)):
         fine, coarse = dense(level - 1), dense(level)
-        P = np.zeros((len(fine), len(coarse)))
-        for i in range(mg.sizes[level - 1]):
-            c = agg[vb[level - 1] + i] - vb[level]
-            P[3 * i:3 * i + 3, 3 * c:3 * c + 3] = np.eye(3)
+        P = prolongation(mg, level, S)
         np.testing.assert_allclose(coarse, P.T @ fine @ P, rtol=0, atol=1e-12 * np.abs(fine).max())
+
+
+def cross_matrix(d) -> np.ndarray:
+    """-[d]_x: -[d]_x theta = theta x d."""
+    return np.array([[0.0, d[2], -d[1]], [-d[2], 0.0, d[0]], [d[1], -d[0], 0.0]])
+
+
+def dense_level(mg, level) -> np.ndarray:
+    """The aggregation cycle's operator on `level` as a dense matrix (3 unknowns per vertex on level 0, 6 above)."""
+    vb, eb = mg.vbound.to_numpy(), mg.ebound.to_numpy()
+    lo, hi = vb[level:level + 2]
+    elo, ehi = eb[level:level + 2]
+    if level == 0:
+        k, diag, off, v0, e0 = 3, mg.diag.to_numpy(), mg.off.to_numpy(), 0, 0
+    else:
+        k, diag, off, v0, e0 = 6, mg.diag6.to_numpy(), mg.off6.to_numpy(), vb[1], eb[1]
+    A = np.zeros((k * (hi - lo), k * (hi - lo)))
+    ea, eb_ = mg.end_a.to_numpy() - lo, mg.end_b.to_numpy() - lo
+    for g in range(hi - lo):
+        A[k * g:k * g + k, k * g:k * g + k] = diag[lo + g - v0]
+    for q in range(elo, ehi):
+        a, b = ea[q], eb_[q]
+        A[k * a:k * a + k, k * b:k * b + k] += off[q - e0]
+        A[k * b:k * b + k, k * a:k * a + k] += off[q - e0].T
+    return A
+
+
+def prolongation(mg, level, S=None) -> np.ndarray:
+    """The dense prolongation from `level` to `level - 1`, built here from the aggregates and the lever arms the
+    cycle keeps (x_i - c on level 0, c_G - c_K above); S: level 0's filter (3n x 3n), applied to its rows."""
+    vb = mg.vbound.to_numpy()
+    agg, arm = mg.agg.to_numpy(), mg.arm.to_numpy()
+    kf = 3 if level == 1 else 6
+    nf, nc = mg.sizes[level - 1], mg.sizes[level]
+    P = np.zeros((kf * nf, 6 * nc))
+    for i in range(nf):
+        c = agg[vb[level - 1] + i] - vb[level]
+        W = cross_matrix(arm[vb[level - 1] + i])
+        if level == 1:
+            P[3 * i:3 * i + 3, 6 * c:6 * c + 6] = np.hstack([np.eye(3), W])
+        else:
+            P[6 * i:6 * i + 6, 6 * c:6 * c + 6] = np.block([[np.eye(3), W], [np.zeros((3, 3)), np.eye(3)]])
+    return S @ P if S is not None and level == 1 else P
 
 
 def test_aggregation_levels_follow_the_seam_merge_without_compiling():
@@ -309,14 +338,18 @@ def test_aggregation_levels_follow_the_seam_merge_without_compiling():
     assert sc.integrator.last_residual <= 1e-3
 
 
-def test_a_garment_on_its_4_8_levels_uses_them_once_merged_and_a_step_equals_the_direct_solve():
+def test_a_garment_on_its_4_8_levels_uses_them_once_merged_and_a_step_equals_the_direct_solve(monkeypatch):
     """One hierarchy, two uses: a garment sewn coarse to fine (taichi_cloth.garment.levels) is preconditioned by
     V-cycles over the same levels the refiner switches between, from the seam merge on (its pieces apart are on no
     level: aggregation levels before). Its levels are nested by their tables, not by index
     (taichi_cloth.linear.level_cycle.copies), and a step on level 2 of 3 equals the direct solve of the filtered system.
-    `auto` keeps Jacobi on a garment this small."""
+    The policy uses them only with GARMENT_LEVELS (off: the aggregation cycle serves every level of a garment, which
+    `auto` then uses however small the garment)."""
     from taichi_cloth.garment.levels import multilevel_garment
+    from taichi_cloth.linear import policy
     from test_multilevel_garment import SPHERE, two_squares
+
+    monkeypatch.setattr(policy, "GARMENT_LEVELS", True)
 
     mg = multilevel_garment(two_squares(), start_level=0)
     sc = tc.Scene(mg, dt=H, air_damping=GAMMA, precision="f64", colliders=[SPHERE], multilevel={"refine": False},
@@ -354,5 +387,7 @@ def test_a_garment_on_its_4_8_levels_uses_them_once_merged_and_a_step_equals_the
     np.testing.assert_allclose(levels.u.to_numpy()[:s0], d / np.linalg.norm(d, axis=1, keepdims=True), atol=1e-12)
     sc.reset()  # the pieces apart again: off the levels
     assert integ.policy.current is apart and sc.model.data.n_particles == mg.garment.data.n_particles
+    monkeypatch.setattr(policy, "GARMENT_LEVELS", False)
     small = tc.Scene(mg, dt=H, colliders=[SPHERE])
-    assert small.integrator.policy.levels is None and small.integrator.policy.current is small.integrator.policy.jacobi
+    assert small.integrator.policy.levels is None
+    assert isinstance(small.integrator.policy.current, AggregationMultigrid)

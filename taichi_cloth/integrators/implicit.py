@@ -104,10 +104,11 @@ class Implicit(Integrator):
         """Whether this integrator wants the cloth's 4-8 levels (attach_levels) when it has nested ones."""
         return self.options["preconditioner"] != "jacobi"
 
-    def attach_levels(self, nested, why: str | None) -> str | None:
-        """The cloth's nested 4-8 levels (linear.NestedLevels; None, and why, where it has none): the preconditioner
-        policy picks what CG uses (linear.policy). Returns a note for the run when it cannot honour the option."""
-        note = self.policy.attach(nested, why)
+    def attach_levels(self, nested, why: str | None, garment: bool = False) -> str | None:
+        """The cloth's nested 4-8 levels (linear.NestedLevels; None, and why, where it has none) and whether it is a
+        garment: the preconditioner policy picks what CG uses (linear.policy). Returns a note for the run when it
+        cannot honour the option."""
+        note = self.policy.attach(nested, why, garment)
         self.warm[None] = int(self.options["warm_start"] and self.policy.current.warm_start)
         return note
 

@@ -3,12 +3,13 @@ model's changes (a seam merge that names a level, a level switch, a reset that t
 again, new spring constants: Integrator.topology_changed).
 
   jacobi     block Jacobi (linear.jacobi);
-  multigrid  V-cycles over the cloth's nested 4-8 levels where it has them (linear.level_cycle; a garment's from
-             the seam merge on, aggregation or Jacobi before), else over aggregates of its particles
-             (linear.aggregation); Jacobi, with a warning, where neither can be built;
-  auto       V-cycles over 4-8 levels where the cloth has nested ones and is not a garment, over aggregates on a
-             cloth of at least AGGREGATION_FROM particles, else Jacobi.
-Why these thresholds: docs/performance.md, preconditioners.
+  multigrid  on a garment (its pieces apart, sewn, on every 4-8 level it has): V-cycles over aggregates of its
+             particles with their rotations (linear.aggregation); on another cloth with nested 4-8 levels: V-cycles
+             over them (linear.level_cycle); else aggregation; Jacobi, with a warning, where neither can be built;
+  auto       the same, except that a cloth that is neither a garment nor on 4-8 levels is aggregated only from
+             AGGREGATION_FROM particles (Jacobi below).
+The choice between aggregation and Jacobi is made again at every topology change (a garment's coarse level has a
+few hundred particles, its finest thousands). Why: docs/performance.md, preconditioners.
 """
 from __future__ import annotations
 
@@ -23,11 +24,11 @@ from .jacobi import Jacobi
 from .level_cycle import SERIAL_BELOW, SpringMultigrid
 
 PRECONDITIONERS = ("auto", "jacobi", "multigrid")
-#: `auto` aggregates a cloth without 4-8 levels from this many particles (below, the cycle's kernels cost more to
-#: compile than they save)
+#: `auto` aggregates a cloth that is neither a garment nor on 4-8 levels from this many particles (below, the
+#: cycle's kernels cost more to compile than they save on such a cloth's short runs)
 AGGREGATION_FROM = 2000
-#: whether `auto` uses a garment's own 4-8 levels once its seams are merged (no: slower per step than Jacobi on a
-#: CPU); "multigrid" asks for them
+#: whether a garment's own 4-8 levels precondition it once its seams are merged, instead of the aggregation cycle
+#: (no: the aggregation cycle with rotations takes fewer iterations and less time per step there)
 GARMENT_LEVELS = False
 
 
@@ -47,24 +48,29 @@ class NestedLevels:
 
 class PreconditionerPolicy:
     """The preconditioner in use (`current`, a linear.Preconditioner) for a model (taichi_cloth.model.Model) and the
-    option `choice`; `levels` (4-8 V-cycles) and `apart` (aggregation) are built once, when the cloth allows them."""
+    option `choice`; `levels` (4-8 V-cycles) is built once, when the cloth allows them, `apart` (aggregation) the
+    first time the cloth wants it."""
 
     def __init__(self, choice: str, model):
         self.choice, self.model = choice, model
         self.jacobi = Jacobi(model)
         self.levels: SpringMultigrid | None = None
-        self.apart: AggregationMultigrid | None = None  # while off the levels, or the cloth's only multigrid
+        self.apart: AggregationMultigrid | None = None  # off the 4-8 levels, or the cloth's only multigrid
+        self.apart_failed: str | None = None             # why aggregation could not be built, once it failed
+        self.garment = False
         self.starts_off_levels = False
         self.current = self.jacobi
 
-    def attach(self, nested: NestedLevels | None, why: str | None) -> str | None:
-        """Choose for a cloth with these nested levels (None: it has none, `why` says so). Returns (and warns) a
-        note for the run when "multigrid" was asked for and Jacobi serves instead."""
+    def attach(self, nested: NestedLevels | None, why: str | None, garment: bool = False) -> str | None:
+        """Choose for a cloth with these nested levels (None: it has none, `why` says so); garment: the cloth is a
+        garment (its pieces apart, then sewn). Returns (and warns) a note for the run when "multigrid" was asked for
+        and Jacobi serves instead."""
         named = self.choice == "multigrid"
         if self.choice == "jacobi":
             return None
-        if nested is not None and nested.garment and not (named or GARMENT_LEVELS):
-            why = "is used on a garment's levels only when asked for by name"
+        self.garment = garment or (nested is not None and nested.garment)
+        if nested is not None and nested.garment and not GARMENT_LEVELS:
+            why = "is not used on a garment's 4-8 levels (GARMENT_LEVELS)"
         elif nested is not None:
             try:
                 self.levels = self._level_cycle(nested)
@@ -77,20 +83,33 @@ class PreconditionerPolicy:
                     self.current = self.levels
                 if not nested.garment:
                     return None
-        if named or self.model.data.n_particles >= AGGREGATION_FROM:
-            try:
-                apart = AggregationMultigrid(self.model.capacity[:2], fp=self.model.fp,
-                                             serial=ti.lang.impl.current_cfg().arch == ti.cpu)
-                apart.rebuild(self.model.data.springs, self.model.data.n_particles)
-                self.apart = self.current = apart
+        if self._wants_aggregation():
+            if self._aggregation() is not None:
+                self.current = self.apart
                 return None
-            except ValueError as err:
-                why = f"{why}, and aggregation failed: {err}"
+            why = f"{why}, and aggregation failed: {self.apart_failed}"
         if named and self.levels is None:
             note = f"the multigrid preconditioner {why}; integrator 'implicit' uses Jacobi instead"
             warn(note)
             return note
         return None
+
+    def _wants_aggregation(self) -> bool:
+        """Whether the cloth as it is now (off 4-8 levels) is preconditioned by aggregation rather than Jacobi."""
+        return self.choice == "multigrid" or self.garment or self.model.data.n_particles >= AGGREGATION_FROM
+
+    def _aggregation(self) -> AggregationMultigrid | None:
+        """The aggregation cycle rebuilt for the model's cloth (built the first time), or None where it cannot be
+        (apart_failed says why)."""
+        try:
+            if self.apart is None:
+                self.apart = AggregationMultigrid(self.model.capacity[:2], fp=self.model.fp,
+                                                  serial=ti.lang.impl.current_cfg().arch == ti.cpu)
+            self.apart.rebuild(self.model.data.springs, self.model.data.n_particles, self.model.data.kind)
+            return self.apart
+        except ValueError as err:
+            self.apart_failed = str(err)
+            return None
 
     def _level_cycle(self, nested: NestedLevels) -> SpringMultigrid:
         """Raises ValueError when the levels are not nested or the coarsest is too large."""
@@ -105,15 +124,20 @@ class PreconditionerPolicy:
 
     def topology_changed(self, level: int | None) -> None:
         """The model was refilled: on the 4-8 level `level`, or with none named on the level it was on when its
-        particle count is that level's (new spring constants), else off the levels (a garment's pieces apart)."""
+        particle count is that level's (new spring constants), else off the levels (a garment's pieces apart). Off
+        the 4-8 levels, aggregation or Jacobi is chosen again for the cloth as it is now."""
+        if self.choice == "jacobi":
+            return
         if self.levels is not None:
             if level is not None:
                 self.levels.set_active_level(level)
                 self.current = self.levels
-            elif self.model.data.n_particles != self.levels.sizes[self.levels.active]:
-                self.current = self.apart or self.jacobi
-        if self.current is self.apart:
-            self.apart.rebuild(self.model.data.springs, self.model.data.n_particles)
+                return
+            if self.model.data.n_particles == self.levels.sizes[self.levels.active] and self.current is self.levels:
+                return
+        self.current = self.jacobi
+        if self._wants_aggregation() and self._aggregation() is not None:
+            self.current = self.apart
 
     @property
     def detail(self) -> str:
