@@ -343,8 +343,8 @@ def test_a_garment_on_its_4_8_levels_uses_them_once_merged_and_a_step_equals_the
     V-cycles over the same levels the refiner switches between, from the seam merge on (its pieces apart are on no
     level: aggregation levels before). Its levels are nested by their tables, not by index
     (taichi_cloth.linear.level_cycle.copies), and a step on level 2 of 3 equals the direct solve of the filtered system.
-    The policy uses them only with GARMENT_LEVELS (off: the aggregation cycle serves every level of a garment, which
-    `auto` then uses however small the garment)."""
+    The policy uses them only with GARMENT_LEVELS (off: the aggregation cycle serves a garment's levels, `auto` from
+    AGGREGATION_FROM particles, Jacobi below)."""
     from taichi_cloth.garment.levels import multilevel_garment
     from taichi_cloth.linear import policy
     from test_multilevel_garment import SPHERE, two_squares
@@ -390,4 +390,7 @@ def test_a_garment_on_its_4_8_levels_uses_them_once_merged_and_a_step_equals_the
     monkeypatch.setattr(policy, "GARMENT_LEVELS", False)
     small = tc.Scene(mg, dt=H, colliders=[SPHERE])
     assert small.integrator.policy.levels is None
-    assert isinstance(small.integrator.policy.current, AggregationMultigrid)
+    assert small.integrator.policy.current is small.integrator.policy.jacobi  # 242 particles: below AGGREGATION_FROM
+    named = tc.Scene(mg, dt=H, colliders=[SPHERE], integrator_options={"preconditioner": "multigrid"})
+    assert named.integrator.policy.levels is None
+    assert isinstance(named.integrator.policy.current, AggregationMultigrid)
