@@ -49,8 +49,8 @@ class Implicit(Integrator):
         "cg_max_iterations": Option(int, 200, "CG iteration cap per step, shared by its Newton iterations",
                                     at_least_one),
         "preconditioner": Option(str, "auto", "jacobi | multigrid (V-cycles over the cloth's 4-8 levels, or over "
-                                 "aggregates of its particles) | auto (multigrid on 4-8 levels and on cloths of "
-                                 "2,000 particles or more)",
+                                 "aggregates of its particles with their rotations: a garment) | auto (multigrid on "
+                                 "4-8 levels, aggregation from 2,000 particles)",
                                  one_of(PRECONDITIONERS)),
         "newton_iterations": Option(int, 4, "the most Newton iterations per step (each one CG solve and a line "
                                     "search); the first is enough when the step does not gain energy", at_least_one),
