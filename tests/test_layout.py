@@ -27,6 +27,7 @@ ENGINE_LAYERS = (
 #: what a function may import lazily: modules that take long to import (or are optional extras) and serve one
 #: rarely used path; everything else is imported at the top of the module
 LAZY = ("rerun", "playwright", "warp", "pxr", "ray", "matplotlib", "trimesh", "meshio", "ezdxf", "scipy", "tqdm",
+        "PIL",                          # matplotlib's image library: the still pictures' PNG writer
         "taichi_cloth.recorder",        # rerun
         "taichi_cloth.garment.local",   # scipy.spatial, for a garment refined locally
         "taichi_cloth.garment.dxf",     # ezdxf
