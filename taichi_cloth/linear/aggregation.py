@@ -478,13 +478,7 @@ class AggregationMultigrid:
                 else:
                     D += coarse_galerkin(self.fp, self.diag6[m - n0], W, W)
             for e in range(self.in_ptr[g], self.in_ptr[g + 1]):
-                q = self.inner[e]
-                Wa, Wb = cross_matrix(self.arm[self.end_a[q]]), cross_matrix(self.arm[self.end_b[q]])
-                X = ti.Matrix.zero(self.fp, 6, 6)
-                if ti.static(first):
-                    X = fine_galerkin(self.fp, self.off[q], Wa, Wb)
-                else:
-                    X = coarse_galerkin(self.fp, self.off6[q - e0], Wa, Wb)
+                X = self._edge_galerkin(self.inner[e], e0, first)
                 D += X + X.transpose()
             self.diag6[g - n0] = D
             self.dinv6[g - n0] = ti.cast(spd_inverse6(regularised(ti.cast(D, ti.f64), eps)), self.fp)
@@ -492,18 +486,24 @@ class AggregationMultigrid:
         for k in range(self.ebound[l], self.ebound[l + 1]):
             O = ti.Matrix.zero(self.fp, 6, 6)
             for e in range(self.ce_ptr[k], self.ce_ptr[k + 1]):
-                q = self.ce[e]
-                Wa, Wb = cross_matrix(self.arm[self.end_a[q]]), cross_matrix(self.arm[self.end_b[q]])
-                X = ti.Matrix.zero(self.fp, 6, 6)
-                if ti.static(first):
-                    X = fine_galerkin(self.fp, self.off[q], Wa, Wb)
-                else:
-                    X = coarse_galerkin(self.fp, self.off6[q - e0], Wa, Wb)
+                X = self._edge_galerkin(self.ce[e], e0, first)
                 if self.ce_flip[e] != 0:
                     O += X.transpose()
                 else:
                     O += X
             self.off6[k - e0] = O
+
+    @ti.func
+    def _edge_galerkin(self, q, e0, first: ti.template()):
+        """The 6x6 Galerkin block T_a^T O_q T_b of edge q, from the level above's edge block (level 0's stored 3x3
+        block when `first`, else the 6x6 block of a coarse level whose edges start at e0) and its ends' lever arms."""
+        Wa, Wb = cross_matrix(self.arm[self.end_a[q]]), cross_matrix(self.arm[self.end_b[q]])
+        X = ti.Matrix.zero(self.fp, 6, 6)
+        if ti.static(first):
+            X = fine_galerkin(self.fp, self.off[q], Wa, Wb)
+        else:
+            X = coarse_galerkin(self.fp, self.off6[q - e0], Wa, Wb)
+        return X
 
     # ------------------------------------------------------------------ the kernels
     @ti.kernel
