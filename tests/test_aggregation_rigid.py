@@ -129,11 +129,11 @@ def test_the_cg_count_stays_bounded_as_the_spacing_halves():
     float32 as the demos run) at 2, 1.4 and 1 cm spacing: the finest takes at most MARGIN more than the coarsest,
     where Jacobi's count grows by more (figures: docs/performance.md, preconditioners)."""
     its = {}
-    for preconditioner in ("multigrid", "jacobi"):
-        for spacing in (0.02, 0.014, 0.01):
-            sc = sewn_pair(spacing, preconditioner, precision="f32", cg_tolerance=1e-3)
-            sc.step(12)
-            stats = sc.integrator.stats
-            its[preconditioner, spacing] = stats["cg_iterations"] / stats["newton_iterations"]
-    assert its["multigrid", 0.01] <= its["multigrid", 0.02] + MARGIN, its
+    runs = [("multigrid", 0.02), ("multigrid", 0.014), ("multigrid", 0.01), ("jacobi", 0.02), ("jacobi", 0.01)]
+    for preconditioner, spacing in runs:  # (each scene compiles its kernels: Jacobi's 1.4 cm would say nothing new)
+        sc = sewn_pair(spacing, preconditioner, precision="f32", cg_tolerance=1e-3)
+        sc.step(12)
+        stats = sc.integrator.stats
+        its[preconditioner, spacing] = stats["cg_iterations"] / stats["newton_iterations"]
+    assert max(its["multigrid", 0.014], its["multigrid", 0.01]) <= its["multigrid", 0.02] + MARGIN, its
     assert its["jacobi", 0.01] > its["jacobi", 0.02] + MARGIN, its  # it tells a preconditioner that does not scale
