@@ -88,8 +88,7 @@ from .assembly import STEP_GUARDS
 from .body.landmarks import Body
 from .builder import ClothBuilder
 from .errors import BodyError, MeshError, PatternError, SceneError
-from .garment.garment import build_garment
-from .garment.garment import RESOLUTIONS
+from .garment.garment import RESOLUTIONS, build_garment
 from .garment.garmentfile import load_garment
 from .garment.levels import multilevel_garment
 from .guards import check_memory, check_precision, grid_particles

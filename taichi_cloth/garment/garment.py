@@ -91,7 +91,6 @@ class GarmentSpec:
     material: str | Material = "cotton"
     spacing: float = 0.02
     levels: int = 1
-
     resolution: str | None = None
 
     def at_resolution(self, name: str) -> None:
