@@ -219,6 +219,7 @@ class AggregationMultigrid:
         self.diag6 = blk.matrix(6, 6, fp, VC)     # Galerkin diagonal blocks
         self.dinv6 = blk.matrix(6, 6, fp, VC)     # the inverses of their regularised copies
         self.off6 = blk.matrix(6, 6, fp, EC)      # Galerkin edge blocks
+        self.gal = blk.matrix(6, 6, fp, EC)       # R_a^T O_e R_b of every edge of the coarse level above one made
         self.b6 = blk.vector(6, fp, VC)           # right-hand side (force [kg m/s], torque [kg m^2/s])
         self.x6 = blk.vector(6, fp, VC)           # iterate (t [m/s], theta [1/s])
         self.r6 = blk.vector(6, fp, VC)
@@ -375,8 +376,24 @@ class AggregationMultigrid:
         self._factor()
 
     def apply(self, r, z) -> None:
-        """z = V-cycle(r): r, z are (P,) vec3 fields of the cloth [kg m/s], [m/s]. One kernel launch."""
-        self._cycle(r, z)
+        """z = V-cycle(r): r, z are (P,) vec3 fields of the cloth [kg m/s], [m/s]. Serial (the CPU): one launch, the
+        levels a loop in it. Parallel: a launch per level down and up and one for the coarsest, each loop over a
+        level's vertices parallel. (One kernel with every level unrolled took 11 s to compile; a launch per level
+        on the CPU cost 15 % of the 129 x 129 sheet's step.)"""
+        if self.serial:
+            self._cycle_serial(r, z)
+            return
+        nl = len(self.sizes)
+        self._descend_cloth_kernel(r)
+        # a hierarchy of one or two levels launches one of each on no vertices, so that they are compiled now and
+        # a later rebuild with more levels (a seam merge, a level switch) compiles nothing
+        coarse = range(1, max(nl - 1, 2))
+        for level in coarse:
+            self._descend_kernel(level)
+        self._solve_coarsest_kernel()
+        for level in reversed(coarse):
+            self._ascend_kernel(level)
+        self._ascend_cloth_kernel(z)
 
     # ------------------------------------------------------------------ helpers of the kernels
     @ti.func
@@ -466,6 +483,14 @@ class AggregationMultigrid:
                 self.arm[i] = ti.cast(system.x[i], self.fp) - self.centre[self.agg[i] - n0]
             else:
                 self.arm[i] = self.centre[i - n0] - self.centre[self.agg[i] - n0]
+        # from a coarse level, every edge's Galerkin block once (the diagonal sums the edges inside an aggregate,
+        # the edge blocks those between two): one inlined copy of the 6x6 products, not two, saves 2 s of compile;
+        # level 0's are cheap 3x3 products, and its many edges would cost memory traffic, so they are inlined
+        ea = self.ebound[l - 1]
+        if ti.static(not first):
+            ti.loop_config(serialize=self.serial)
+            for q in range(ea, self.ebound[l]):
+                self.gal[q - ea] = self._edge_galerkin(q, e0, first)
         ti.loop_config(serialize=self.serial)
         for g in range(self.vbound[l], self.vbound[l + 1]):
             D = ti.Matrix.zero(self.fp, 6, 6)
@@ -478,7 +503,7 @@ class AggregationMultigrid:
                 else:
                     D += coarse_galerkin(self.fp, self.diag6[m - n0], W, W)
             for e in range(self.in_ptr[g], self.in_ptr[g + 1]):
-                X = self._edge_galerkin(self.inner[e], e0, first)
+                X = self._galerkin_of(self.inner[e], ea, e0, first)
                 D += X + X.transpose()
             self.diag6[g - n0] = D
             self.dinv6[g - n0] = ti.cast(spd_inverse6(regularised(ti.cast(D, ti.f64), eps)), self.fp)
@@ -486,12 +511,22 @@ class AggregationMultigrid:
         for k in range(self.ebound[l], self.ebound[l + 1]):
             O = ti.Matrix.zero(self.fp, 6, 6)
             for e in range(self.ce_ptr[k], self.ce_ptr[k + 1]):
-                X = self._edge_galerkin(self.ce[e], e0, first)
+                X = self._galerkin_of(self.ce[e], ea, e0, first)
                 if self.ce_flip[e] != 0:
                     O += X.transpose()
                 else:
                     O += X
             self.off6[k - e0] = O
+
+    @ti.func
+    def _galerkin_of(self, q, ea, e0, first: ti.template()):
+        """Edge q's Galerkin block: computed from level 0, kept in gal from a coarse level (whose edges start at ea)."""
+        X = ti.Matrix.zero(self.fp, 6, 6)
+        if ti.static(first):
+            X = self._edge_galerkin(q, e0, first)
+        else:
+            X = self.gal[q - ea]
+        return X
 
     @ti.func
     def _edge_galerkin(self, q, e0, first: ti.template()):
@@ -571,15 +606,15 @@ class AggregationMultigrid:
                             self.chol[6 * b + d, 6 * a + c] = O[c, d]
             cholesky(self.chol, C)
 
-    @ti.kernel
-    def _cycle(self, r: ti.template(), z: ti.template()):
+    @ti.func
+    def _descend_cloth(self, r: ti.template()):
+        """The cycle's first leg on the cloth: b = r, smooth from zero, residual, restrict to level 1 (R^T: a force
+        and its torque about the aggregate's centroid)."""
         nl = self.n_levels[None]
-        n0, e0 = self.vbound[1], self.ebound[1]
+        n0 = self.vbound[1]
         ti.loop_config(serialize=self.serial)
         for i in range(n0):
             self.b[i] = ti.cast(r[i], self.fp)
-        # down: smooth from zero, residual, restrict to the level below (R^T: a force and its torque about the
-        # aggregate's centroid)
         h0 = ti.select(nl > 1, n0, 0)  # level 0 is smoothed here unless it is the coarsest
         self._smooth(0, h0, True)
         ti.loop_config(serialize=self.serial)
@@ -594,57 +629,77 @@ class AggregationMultigrid:
                 tq = self.arm[m].cross(f)
                 acc += ti.Vector([f[0], f[1], f[2], tq[0], tq[1], tq[2]], self.fp)
             self.b6[g - n0] = acc
-        for l in ti.static(range(1, MAX_LEVELS - 1)):
-            lo = self.vbound[l]
-            hi = ti.select(l < nl - 1, self.vbound[l + 1], lo)  # the coarsest and the unused levels: nothing
-            self._smooth6(lo, hi, n0, e0, True)
-            ti.loop_config(serialize=self.serial)
-            for g in range(lo, hi):
-                self.r6[g - n0] = self.b6[g - n0] - self._apply_A6(g, n0, e0)
-            chi = ti.select(l < nl - 1, self.vbound[l + 2], hi)
-            ti.loop_config(serialize=self.serial)
-            for g in range(hi, chi):
-                acc = ti.Vector.zero(self.fp, 6)
-                for e in range(self.mem_ptr[g], self.mem_ptr[g + 1]):
-                    m = self.mem[e]
-                    rm = self.r6[m - n0]
-                    f = ti.Vector([rm[0], rm[1], rm[2]], self.fp)
-                    tq = self.arm[m].cross(f)
-                    acc += rm + ti.Vector([0.0, 0.0, 0.0, tq[0], tq[1], tq[2]], self.fp)
-                self.b6[g - n0] = acc
-        # the coarsest level: x = (L L^T)^-1 b, in one thread
-        ti.loop_config(serialize=True)
-        for _ in range(1):
-            lc = nl - 1
-            v0, v1 = self.vbound[lc], self.vbound[lc + 1]
-            if lc == 0:
-                for g in range(v0, v1):
-                    for c in ti.static(range(3)):
-                        self.work[3 * g + c] = ti.cast(self.b[g][c], ti.f64)
-                cholesky_solve(self.chol, self.work, 3 * v1)
-                for g in range(v0, v1):
-                    self.x[g] = ti.Vector([self.work[3 * g], self.work[3 * g + 1], self.work[3 * g + 2]], self.fp)
-            else:
-                for g in range(v0, v1):
-                    for c in ti.static(range(6)):
-                        self.work[6 * (g - v0) + c] = ti.cast(self.b6[g - n0][c], ti.f64)
-                cholesky_solve(self.chol, self.work, 6 * (v1 - v0))
-                for g in range(v0, v1):
-                    k = 6 * (g - v0)
-                    self.x6[g - n0] = ti.Vector([self.work[k], self.work[k + 1], self.work[k + 2], self.work[k + 3],
-                                                self.work[k + 4], self.work[k + 5]], self.fp)
-        # up: add the coarse correction (R x: the aggregate's rigid motion at the member), smooth
-        for k in ti.static(range(MAX_LEVELS - 2)):
-            l = ti.static(MAX_LEVELS - 2 - k)
-            lo = self.vbound[l]
-            hi = ti.select(l < nl - 1, self.vbound[l + 1], lo)
-            ti.loop_config(serialize=self.serial)
-            for g in range(lo, hi):
-                xc = self.x6[self.agg[g] - n0]
-                th = ti.Vector([xc[3], xc[4], xc[5]], self.fp)
-                v = th.cross(self.arm[g])
-                self.x6[g - n0] += xc + ti.Vector([v[0], v[1], v[2], 0.0, 0.0, 0.0], self.fp)
-            self._smooth6(lo, hi, n0, e0, False)
+
+    @ti.func
+    def _descend(self, l):
+        """Coarse level l (1 <= l, above the coarsest; nothing on the coarsest): smooth from zero, residual,
+        restrict to level l + 1."""
+        nl = self.n_levels[None]
+        n0, e0 = self.vbound[1], self.ebound[1]
+        lo = self.vbound[l]
+        hi = ti.select(l < nl - 1, self.vbound[l + 1], lo)
+        self._smooth6(lo, hi, n0, e0, True)
+        ti.loop_config(serialize=self.serial)
+        for g in range(lo, hi):
+            self.r6[g - n0] = self.b6[g - n0] - self._apply_A6(g, n0, e0)
+        chi = ti.select(l < nl - 1, self.vbound[l + 2], hi)
+        ti.loop_config(serialize=self.serial)
+        for g in range(hi, chi):
+            acc = ti.Vector.zero(self.fp, 6)
+            for e in range(self.mem_ptr[g], self.mem_ptr[g + 1]):
+                m = self.mem[e]
+                rm = self.r6[m - n0]
+                f = ti.Vector([rm[0], rm[1], rm[2]], self.fp)
+                tq = self.arm[m].cross(f)
+                acc += rm + ti.Vector([0.0, 0.0, 0.0, tq[0], tq[1], tq[2]], self.fp)
+            self.b6[g - n0] = acc
+
+    @ti.func
+    def _solve_coarsest(self):
+        """x = (L L^T)^-1 b on the coarsest level (loops that must run in one thread: call it from one)."""
+        nl = self.n_levels[None]
+        n0 = self.vbound[1]
+        lc = nl - 1
+        v0, v1 = self.vbound[lc], self.vbound[lc + 1]
+        if lc == 0:
+            for g in range(v0, v1):
+                for c in ti.static(range(3)):
+                    self.work[3 * g + c] = ti.cast(self.b[g][c], ti.f64)
+            cholesky_solve(self.chol, self.work, 3 * v1)
+            for g in range(v0, v1):
+                self.x[g] = ti.Vector([self.work[3 * g], self.work[3 * g + 1], self.work[3 * g + 2]], self.fp)
+        else:
+            for g in range(v0, v1):
+                for c in ti.static(range(6)):
+                    self.work[6 * (g - v0) + c] = ti.cast(self.b6[g - n0][c], ti.f64)
+            cholesky_solve(self.chol, self.work, 6 * (v1 - v0))
+            for g in range(v0, v1):
+                k = 6 * (g - v0)
+                self.x6[g - n0] = ti.Vector([self.work[k], self.work[k + 1], self.work[k + 2], self.work[k + 3],
+                                            self.work[k + 4], self.work[k + 5]], self.fp)
+
+    @ti.func
+    def _ascend(self, l):
+        """Coarse level l (above the coarsest; nothing on the coarsest): add the correction of level l + 1 (R x:
+        the aggregate's rigid motion at the member), smooth."""
+        nl = self.n_levels[None]
+        n0, e0 = self.vbound[1], self.ebound[1]
+        lo = self.vbound[l]
+        hi = ti.select(l < nl - 1, self.vbound[l + 1], lo)
+        ti.loop_config(serialize=self.serial)
+        for g in range(lo, hi):
+            xc = self.x6[self.agg[g] - n0]
+            th = ti.Vector([xc[3], xc[4], xc[5]], self.fp)
+            v = th.cross(self.arm[g])
+            self.x6[g - n0] += xc + ti.Vector([v[0], v[1], v[2], 0.0, 0.0, 0.0], self.fp)
+        self._smooth6(lo, hi, n0, e0, False)
+
+    @ti.func
+    def _ascend_cloth(self, z: ti.template()):
+        """The cycle's last leg on the cloth: add level 1's correction (filtered), smooth, z = x."""
+        nl = self.n_levels[None]
+        n0 = self.vbound[1]
+        h0 = ti.select(nl > 1, n0, 0)
         ti.loop_config(serialize=self.serial)
         for g in range(h0):
             xc = self.x6[self.agg[g] - n0]
@@ -654,3 +709,40 @@ class AggregationMultigrid:
         ti.loop_config(serialize=self.serial)
         for i in range(n0):
             z[i] = ti.cast(self.x[i], z.dtype)
+
+    # ------------------------------------------------------------------ the kernels of the cycle
+    @ti.kernel
+    def _cycle_serial(self, r: ti.template(), z: ti.template()):
+        """The whole V-cycle in one thread and one launch, its levels a runtime loop (the CPU)."""
+        ti.loop_config(serialize=True)
+        for _ in range(1):
+            nl = self.n_levels[None]
+            self._descend_cloth(r)
+            for l in range(1, nl - 1):
+                self._descend(l)
+            self._solve_coarsest()
+            for k in range(1, nl - 1):
+                self._ascend(nl - 1 - k)
+            self._ascend_cloth(z)
+
+    @ti.kernel
+    def _descend_cloth_kernel(self, r: ti.template()):
+        self._descend_cloth(r)
+
+    @ti.kernel
+    def _descend_kernel(self, l: ti.i32):
+        self._descend(l)
+
+    @ti.kernel
+    def _solve_coarsest_kernel(self):
+        ti.loop_config(serialize=True)
+        for _ in range(1):
+            self._solve_coarsest()
+
+    @ti.kernel
+    def _ascend_kernel(self, l: ti.i32):
+        self._ascend(l)
+
+    @ti.kernel
+    def _ascend_cloth_kernel(self, z: ti.template()):
+        self._ascend_cloth(z)
