@@ -32,11 +32,21 @@ class Contacts:
         blk.finalize(self)
         self.friction_scale[None] = 1.0
 
+    def clear(self) -> None:
+        """No contact (the collision stage writes them afresh); what static friction holds is kept."""
+        self._clear(0)
+
+    def reset(self) -> None:
+        """No contact and nothing held (a scene back at its start). Compiles nothing after a first clear()."""
+        self._clear(1)
+
     @ti.kernel
-    def clear(self):
+    def _clear(self, held: ti.i32):
         ti.loop_config(serialize=self.model.serial)
         for i in range(self.model.n_particles[None]):
             self.normal[i] = ti.Vector.zero(self.model.fp, 3)
+            if held != 0:
+                self.stuck[i] = 0
 
     @ti.func
     def projector(self, i):

@@ -3,32 +3,21 @@ garment's preconditioned solve equals scipy's direct solve of the filtered syste
 blocks, its cycle is the same operator run in one thread or level by level in parallel, and its CG count stays
 bounded as the garment's spacing halves."""
 import numpy as np
+import pytest
 import scipy.sparse as sp
 import scipy.sparse.linalg as spl
 
-import taichi_cloth as tc
+from conftest import damping_matrix
 from taichi_cloth.linear.aggregation import AggregationMultigrid
-from test_implicit_multigrid import BALL, GAMMA, H, prolongation
+from taichi_cloth.stability import stiffness_matrix
+from test_implicit_multigrid import GAMMA, H, assert_symmetric_positive, dense_level, prolongation, sewn_pair
 
 
-def sewn_pair(spacing: float, preconditioner: str = "multigrid", precision: str = "f64", **options):
-    """Two 0.2 m squares sewn into one 0.4 x 0.2 m sheet at `spacing` [m] (the seam merged: a garment's topology),
-    held by its back edge above a ball."""
-    from taichi_cloth.garment.garment import FreePlacement, GarmentSpec, build_garment
-    from taichi_cloth.garment.seams import Seam, SeamSide
-    from taichi_cloth.garment.sewing import merge_seams
-    from test_garment import square
-
-    seam = Seam("middle", SeamSide("A", "br", "tr"), SeamSide("B", "bl", "tl"))
-    flat = {"v_axis": (0.0, 0.0, 1.0)}
-    g = build_garment(GarmentSpec("sewn pair", [square("A"), square("B")], [seam],
-                                  {"A": FreePlacement((-0.2, 0.6, -0.1), **flat),
-                                   "B": FreePlacement((0.0, 0.6, -0.1), **flat)}, spacing=spacing))
-    x = g.data.positions
-    data, _, _, _ = merge_seams(g.data, g, x, np.zeros_like(x))
-    back = {"box": ((-0.21, 0.59, -0.11), (0.21, 0.61, -0.09))}
-    return tc.Scene(data, dt=H, air_damping=GAMMA, precision=precision, pins=[back], colliders=[BALL],
-                    integrator_options={"preconditioner": preconditioner, **options})
+@pytest.fixture(scope="module")
+def pair():
+    """The sewn pair at 2 cm, float64, aggregation-preconditioned: one scene (its kernels compiled once) that each
+    test resets to its start."""
+    return sewn_pair(0.02)
 
 
 def filtered_matrix(integ):
@@ -62,12 +51,13 @@ def filtered_matrix(integ):
     return (Sm @ A @ Sm + sp.diags(np.repeat(mass, 3)) @ (sp.identity(3 * n) - Sm)).tocsr(), Sm
 
 
-def test_a_rigid_motion_is_reproduced_exactly_by_the_prolongation_from_every_coarse_level():
+def test_a_rigid_motion_is_reproduced_exactly_by_the_prolongation_from_every_coarse_level(pair):
     """v_i = t + theta x (x_i - p) (a small rotation about an arbitrary axis through an arbitrary point, and a
     translation) is P_1 ... P_l of the coarse vertices' (t + theta x (c - p), theta), on every level l, with the lever
     arms the cycle computed from the current positions (the Galerkin test of test_implicit_multigrid checks that the
     cycle's coarse operators are P^T A~ P with this P). A translation-only coarse space misses it by |theta| |x - c|."""
-    sc = sewn_pair(0.02)
+    sc = pair
+    sc.reset()
     sc.step(6)  # off the flat start
     integ = sc.integrator
     mg = integ.policy.current
@@ -94,11 +84,12 @@ def test_a_rigid_motion_is_reproduced_exactly_by_the_prolongation_from_every_coa
         assert np.abs(P @ translations.reshape(-1) - v).max() > 1e-4  # the rotation is what it needs
 
 
-def test_a_garment_solve_preconditioned_by_the_cycle_equals_the_direct_solve():
+def test_a_garment_solve_preconditioned_by_the_cycle_equals_the_direct_solve(pair):
     """The aggregation-preconditioned CG solution of a Newton system of the sewn pair lying partly on the ball (pins,
     contacts held and sliding) equals scipy's direct solve of A~ x = S b, A~ built from the BlockSystem's blocks, to
     1e-8 of its largest component (CG to a relative 1e-12, float64)."""
-    sc = sewn_pair(0.02, cg_tolerance=1e-12, cg_max_iterations=2000)
+    sc = pair
+    sc.reset()
     sc.step(12)
     integ = sc.integrator
     n = sc.model.data.n_particles
@@ -133,20 +124,86 @@ def test_a_garment_solve_preconditioned_by_the_cycle_equals_the_direct_solve():
     np.testing.assert_allclose(integ.pcg.z.to_numpy()[:n], serial, rtol=0, atol=1e-12 * np.abs(serial).max())
 
 
+def test_an_aggregation_v_cycle_is_symmetric_and_positive_and_its_levels_are_galerkin(pair):
+    """The aggregation cycle is the symmetric positive definite operator CG needs, and every coarse level is
+    P^T A~ P of the level above (P the aggregates' rigid-body prolongation: level 0's S_i [I, -[x_i - c]_x], a coarse
+    vertex's [[I, -[c_G - c_K]_x], [0, I]]): checked on the sewn pair against the blocks of the filtered operator
+    A~ = S A S + M' (I - S) built here."""
+    sc = pair
+    sc.reset()
+    sc.step(12)
+    integ = sc.integrator
+    mg = integ.policy.current
+    integ.system.set_step(H, GAMMA)
+    integ._assemble(H, H * GAMMA, 1)  # the Newton system's springs at the current state
+    mg.prepare(integ.system, integ.filter)
+    n = sc.model.data.n_particles
+    assert_symmetric_positive(mg, np.random.default_rng(7), np.ones(n, bool))  # every row: A~ has no zero rows
+
+    def dense(level):
+        return dense_level(mg, level)
+
+    # level 0 is A~ of the formulas
+    d, x = sc.model.data, sc.positions()
+    K = stiffness_matrix(x, d.springs, d.stiffness, d.rest_length)
+    D = damping_matrix(d, x)
+    A = np.diag(np.repeat(d.mass, 3) * (1 + H * GAMMA)) + H * D + H * H * K
+    normals = sc.contacts.normal.to_numpy()[:n]
+    held = sc.model.pinned | (sc.contacts.stuck.to_numpy()[:n] != 0)
+    S = np.zeros((3 * n, 3 * n))
+    for i in range(n):
+        nn = normals[i] @ normals[i]
+        Si = np.zeros((3, 3)) if held[i] else np.eye(3) - (np.outer(normals[i], normals[i]) / nn if nn > 0 else 0)
+        S[3 * i:3 * i + 3, 3 * i:3 * i + 3] = Si
+    M = np.diag(np.repeat(d.mass, 3) * (1 + H * GAMMA))
+    At = S @ A @ S + M @ (np.eye(3 * n) - S)
+    np.testing.assert_allclose(dense(0), At, rtol=0, atol=1e-12 * np.abs(At).max())
+    for level in range(1, len(mg.sizes)):
+        fine, coarse = dense(level - 1), dense(level)
+        P = prolongation(mg, level, S)
+        np.testing.assert_allclose(coarse, P.T @ fine @ P, rtol=0, atol=1e-12 * np.abs(fine).max())
+
+
+def test_a_reset_scene_runs_again_as_it_ran_from_its_start(pair):
+    """Scene.reset() forgets the contacts too: the sewn pair lying on the ball, reset and run again, retraces its
+    first run (a stale contact held by static friction would keep its particle still in the first step: about
+    h^2 g = 2.7 mm off)."""
+    pair.reset()
+    pair.step(12)
+    first = pair.positions()
+    assert (pair.contacts.stuck.to_numpy() != 0).any()
+    pair.reset()
+    assert not pair.contacts.normal.to_numpy().any() and not pair.contacts.stuck.to_numpy().any()
+    pair.step(12)
+    np.testing.assert_allclose(pair.positions(), first, rtol=0, atol=1e-9)
+
+
 #: CG iterations per Newton iteration the aggregation cycle may add from 2 cm to 1 cm spacing
 MARGIN = 6
 
 
 def test_the_cg_count_stays_bounded_as_the_spacing_halves():
     """CG iterations per Newton iteration of the sewn pair falling onto the ball over 12 steps (cg_tolerance 1e-3,
-    float32 as the demos run) at 2, 1.4 and 1 cm spacing: the finest takes at most MARGIN more than the coarsest,
-    where Jacobi's count grows by more (figures: docs/performance.md, preconditioners)."""
-    its = {}
-    runs = [("multigrid", 0.02), ("multigrid", 0.014), ("multigrid", 0.01), ("jacobi", 0.02), ("jacobi", 0.01)]
-    for preconditioner, spacing in runs:  # (each scene compiles its kernels: Jacobi's 1.4 cm would say nothing new)
-        sc = sewn_pair(spacing, preconditioner, precision="f32", cg_tolerance=1e-3)
+    float32 as the demos run) at 2, 1.4 and 1 cm spacing: the finest takes at most MARGIN more than the coarsest.
+    Jacobi-preconditioned CG on the same Newton systems (the 12th step's) needs more than MARGIN more (figures:
+    docs/performance.md, preconditioners): the test tells a preconditioner that does not scale."""
+    its, jacobi = {}, {}
+    for spacing in (0.02, 0.014, 0.01):
+        sc = sewn_pair(spacing, precision="f32", cg_tolerance=1e-3)
         sc.step(12)
-        stats = sc.integrator.stats
-        its[preconditioner, spacing] = stats["cg_iterations"] / stats["newton_iterations"]
-    assert max(its["multigrid", 0.014], its["multigrid", 0.01]) <= its["multigrid", 0.02] + MARGIN, its
-    assert its["jacobi", 0.01] > its["jacobi", 0.02] + MARGIN, its  # it tells a preconditioner that does not scale
+        integ = sc.integrator
+        its[spacing] = integ.stats["cg_iterations"] / integ.stats["newton_iterations"]
+        # the next step's first Newton system, solved from zero by each preconditioner
+        integ.system.set_step(H, GAMMA)
+        integ._begin()
+        integ._assemble(H, H * GAMMA, 1)
+        counts = []
+        for preconditioner in (integ.policy.current, integ.policy.jacobi):
+            preconditioner.prepare(integ.system, integ.filter)
+            integ.pcg.x.fill(0)
+            integ.pcg.solve(integ.system, integ.filter, preconditioner, 1e-3, 2000)
+            counts.append(integ.pcg.iterations[None])
+        assert isinstance(integ.policy.current, AggregationMultigrid) and counts[0] < counts[1], counts
+        jacobi[spacing] = counts[1]
+    assert max(its[0.014], its[0.01]) <= its[0.02] + MARGIN, its
+    assert jacobi[0.01] > jacobi[0.02] + MARGIN, jacobi
