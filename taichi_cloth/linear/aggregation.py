@@ -364,7 +364,7 @@ class AggregationMultigrid:
         """Once per Newton system: the level operators of A~ from the system's diagonal blocks and spring blocks
         (linear.BlockSystem), its particles' positions (system.x, for the rotations' lever arms) and the filter S
         (linear.ConstraintFilter). A kernel launch per coarse level and one for the coarsest factor (one kernel
-        for all levels took minutes to compile: the 6x6 block products unrolled once per level)."""
+        for all levels unrolled the 6x6 block products once per level: docs/performance.md, compiling the cycle)."""
         self._prepare(system, filt)
         for level in range(2, len(self.sizes)):
             self._prepare_coarse(system, level)
@@ -378,8 +378,8 @@ class AggregationMultigrid:
     def apply(self, r, z) -> None:
         """z = V-cycle(r): r, z are (P,) vec3 fields of the cloth [kg m/s], [m/s]. Serial (the CPU): one launch, the
         levels a loop in it. Parallel: a launch per level down and up and one for the coarsest, each loop over a
-        level's vertices parallel. (One kernel with every level unrolled took 11 s to compile; a launch per level
-        on the CPU cost 15 % of the 129 x 129 sheet's step.)"""
+        level's vertices parallel. (Every level unrolled into one kernel multiplied its compile time; a launch per
+        level costs the CPU more than the loops of a small level: docs/performance.md, compiling the cycle.)"""
         if self.serial:
             self._cycle_serial(r, z)
             return
@@ -484,7 +484,7 @@ class AggregationMultigrid:
             else:
                 self.arm[i] = self.centre[i - n0] - self.centre[self.agg[i] - n0]
         # from a coarse level, every edge's Galerkin block once (the diagonal sums the edges inside an aggregate,
-        # the edge blocks those between two): one inlined copy of the 6x6 products, not two, saves 2 s of compile;
+        # the edge blocks those between two): one inlined copy of the 6x6 products, not two, compiles faster;
         # level 0's are cheap 3x3 products, and its many edges would cost memory traffic, so they are inlined
         ea = self.ebound[l - 1]
         if ti.static(not first):
