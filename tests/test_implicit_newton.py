@@ -47,6 +47,14 @@ def test_smooth_motion_takes_one_newton_iteration():
     assert worst <= 0.0 and sc.integrator.stats["newton_iterations"] <= steps + 2
 
 
+def test_newton_converge_iterates_every_step_to_the_tolerance():
+    """newton_converge: the same swinging sheet takes at least two Newton iterations per step (the first one's
+    decrement is what the tolerance is relative to), where the default took one."""
+    worst, sc = largest_rise_of_the_step("hanging", 1 / 60, 0.5, newton_converge=True)
+    steps = int(round(0.5 * 60))
+    assert worst <= 0.0 and sc.integrator.stats["newton_iterations"] >= 2 * steps, sc.integrator.stats
+
+
 def test_without_a_warm_start_a_step_depends_on_the_state_alone():
     """warm_start = false: CG starts from zero, so a step taken from a copied state after the integrator forgot its
     history is the same step (to round-off); with the warm start the carried-over velocity change makes it
