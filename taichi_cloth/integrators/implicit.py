@@ -90,6 +90,7 @@ class Implicit(Integrator):
         self.stats = {"cg_iterations": 0, "cg_unconverged_steps": 0, "newton_iterations": 0, "line_search_cuts": 0}
         self.last_residual = 0.0  # sqrt(r.Pr / b.Pb) at the end of the last step
         self._warned_cap = False
+        self._warned_nan = False
         # Jacobi-PCG starts from the previous step's dv: it carries over the smooth part Jacobi is slow to find;
         # multigrid finds it itself and starts from 0. On a drape at rest the carried-over dv can keep a flutter
         # alive that the tolerance, relative to a small b, accepts every step; the other way round it carries small
@@ -145,7 +146,14 @@ class Implicit(Integrator):
             self.pcg.solve(self.system, self.filter, preconditioner, tolerance, budget - its)
             # the line search returns what the host needs of this iteration: one read per Newton iteration
             it, rz, rz_b, decrement, rise = self._line_search(dt, int(self.options["line_search"]))
-            residual = math.sqrt(max(rz, 0.0) / rz_b) if rz_b > 0 else 0.0
+            if not (math.isfinite(rz) and math.isfinite(rz_b)):
+                residual = math.inf  # a preconditioner that returned NaN: CG stopped at once, the step is explicit
+                if not self._warned_nan:
+                    self._warned_nan = True
+                    warn(f"implicit: the CG solve gave a non-finite value with {self.policy.detail}; the step took "
+                         "no implicit correction")
+            else:
+                residual = math.sqrt(max(rz, 0.0) / rz_b) if rz_b > 0 else 0.0
             its += int(it)
             unconverged += int(residual > self.options["cg_tolerance"])
             self.stats["newton_iterations"] += 1

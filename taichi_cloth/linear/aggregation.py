@@ -59,7 +59,7 @@ from clothbase.fields import FieldBlock
 
 from ..cloth import SpringKind
 from ..model import csr
-from .dense import cholesky, cholesky_solve
+from .dense import PIVOT_FLOOR, cholesky, cholesky_solve
 from .system import filtered_block, spring_block
 
 #: the most levels (the cloth itself included); a 256 x 256 sheet needs 5
@@ -156,13 +156,15 @@ def regularised(D, eps: ti.template()):
 
 @ti.func
 def spd_inverse6(A):
-    """The inverse of a symmetric positive definite 6x6 float64 matrix, by its Cholesky factor L: L^-T L^-1."""
+    """The inverse of a symmetric positive definite 6x6 float64 matrix, by its Cholesky factor L: L^-T L^-1 (a pivot
+    below PIVOT_FLOOR of its diagonal entry is raised to that: a bounded inverse of a nearly singular block)."""
     L = ti.Matrix.zero(ti.f64, 6, 6)
     for j in ti.static(range(6)):
         s = A[j, j]
+        floor = ti.max(PIVOT_FLOOR * ti.abs(A[j, j]), 1e-300)  # see linear.dense
         for k in ti.static(range(j)):
             s -= L[j, k] * L[j, k]
-        djj = ti.sqrt(ti.max(s, 1e-300))
+        djj = ti.sqrt(ti.max(s, floor))
         L[j, j] = djj
         for i in ti.static(range(j + 1, 6)):
             t = A[i, j]

@@ -3,6 +3,11 @@ hundred unknowns, factored in one thread at every step; float64 fields)."""
 
 import taichi as ti
 
+#: the smallest pivot of a factor, relative to its diagonal entry: a matrix that is positive semidefinite in exact
+#: arithmetic but not in its float32 entries (an aggregate that cannot see one of its rotations) gets a pivot of
+#: this size in that direction instead of one of 1e-300, whose factor overflowed to inf and NaN
+PIVOT_FLOOR = 1e-6
+
 
 @ti.func
 def cholesky(A: ti.template(), C):
@@ -10,9 +15,10 @@ def cholesky(A: ti.template(), C):
     column by column, in the lower triangle (the upper one is left as it was). Call it from one thread."""
     for j in range(C):
         s = A[j, j]
+        floor = ti.max(PIVOT_FLOOR * ti.abs(A[j, j]), 1e-300)
         for k in range(j):
             s -= A[j, k] * A[j, k]
-        djj = ti.sqrt(ti.max(s, 1e-300))
+        djj = ti.sqrt(ti.max(s, floor))
         A[j, j] = djj
         for i in range(j + 1, C):
             t = A[i, j]
