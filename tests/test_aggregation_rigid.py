@@ -209,6 +209,7 @@ def test_the_cg_count_stays_bounded_as_the_spacing_halves():
     assert jacobi[0.01] > jacobi[0.02] + MARGIN, jacobi
 
 
+@pytest.mark.filterwarnings("ignore:.*Taichi matrices/vectors with 6x6")  # the engine's own 6x6 blocks, on purpose
 def test_a_nearly_singular_block_gets_a_bounded_inverse_and_factor():
     """A 6x6 block that is positive semidefinite in exact arithmetic but slightly indefinite in its entries (an
     aggregate that cannot see one of its rotations, in float32) is inverted (the smoother's blocks) and factored (the
