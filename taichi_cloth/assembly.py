@@ -110,7 +110,7 @@ def assemble(cloth, *, name: str = "cloth", integrator: str = DEFAULT_INTEGRATOR
     """
     auto = _check_step_options(dt, adaptive, fps, step_guard)
     rest_criterion, stop_at_rest = _rest(rest)
-    source = _cloth_source(cloth, precision, multilevel, sewing)
+    source = _cloth_source(cloth, precision, multilevel, sewing, integrator_class(integrator).parallel_from_cpu)
     model = source.model
     state = State(model)
     parts_warnings: list[str] = []
@@ -206,28 +206,30 @@ class _Source:
     garment_levels: object = None
 
 
-def _cloth_source(cloth, precision: str, multilevel, sewing) -> _Source:
+def _cloth_source(cloth, precision: str, multilevel, sewing, parallel_from: int) -> _Source:
+    """The cloth's source; its model runs its loops in one thread below `parallel_from` particles (the CPU)."""
     if isinstance(cloth, MultilevelGarment):  # the pieces apart on the start level, then the merged levels
         g = cloth.garment
         local = (multilevel or {}).get("refine") == "local"
-        model = Model(g.data, precision, capacity=cloth.local_capacity if local else cloth.capacity)
+        model = Model(g.data, precision, capacity=cloth.local_capacity if local else cloth.capacity,
+                      parallel_from=parallel_from)
         fixed = [PinSpec(near=g.fixed_targets)] if len(g.fixed) else []
         return _Source(model, [g.data] + list(cloth.cloth.levels), fixed, multilevel=cloth.cloth, garment=g,
                        garment_levels=cloth)
     if isinstance(cloth, MultilevelCloth):
         if sewing is not None:
             raise SceneError("[sewing] needs a garment cloth (a garment file, or taichi_cloth.garment.build_garment)")
-        model = Model(cloth.levels[cloth.start_level], precision, capacity=cloth.capacity)
+        model = Model(cloth.levels[cloth.start_level], precision, capacity=cloth.capacity, parallel_from=parallel_from)
         return _Source(model, list(cloth.levels), [], multilevel=cloth)
     if multilevel is not None:
         raise SceneError("[multilevel] needs a cloth built as a 4-8 hierarchy (ClothBuilder.multilevel_grid)")
     if isinstance(cloth, GarmentCloth):
-        model = Model(cloth.data, precision)
+        model = Model(cloth.data, precision, parallel_from=parallel_from)
         fixed = [PinSpec(near=cloth.fixed_targets)] if len(cloth.fixed) else []
         return _Source(model, [cloth.data], fixed, garment=cloth)
     if sewing is not None:
         raise SceneError("[sewing] needs a garment cloth (a garment file, or taichi_cloth.garment.build_garment)")
-    model = cloth if isinstance(cloth, Model) else Model(cloth, precision)
+    model = cloth if isinstance(cloth, Model) else Model(cloth, precision, parallel_from=parallel_from)
     return _Source(model, [model.data], [])
 
 

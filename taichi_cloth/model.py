@@ -12,7 +12,7 @@ import taichi as ti
 from clothbase.fields import FieldBlock, fill_prefix
 
 from .cloth import ClothData
-from .runtime import ensure_initialized, serial_loops
+from .runtime import PARALLEL_FROM_CPU, ensure_initialized, serial_loops
 from .stability import omega_max_bound, omega_max_estimate, stiffness_sum
 
 _PRECISIONS = {"f32": ti.f32, "f64": ti.f64}
@@ -52,7 +52,8 @@ class Model:
     mirrored in `pinned` (numpy bool, (P,)).
     """
 
-    def __init__(self, data: ClothData, precision: str = "f32", capacity: tuple[int, int, int] | None = None):
+    def __init__(self, data: ClothData, precision: str = "f32", capacity: tuple[int, int, int] | None = None,
+                 parallel_from: int = PARALLEL_FROM_CPU):
         ensure_initialized()
         if precision not in _PRECISIONS:
             raise ValueError(f"precision must be 'f32' or 'f64', got {precision!r}")
@@ -63,8 +64,9 @@ class Model:
         if cp < P or cs < S or ct < T:
             raise ValueError(f"capacity {capacity} is below the cloth's size {(P, S, T)}")
         self.capacity = (cp, cs, ct)
-        #: the kernels of this cloth run their loops in one thread (small cloths on the CPU: runtime.serial_loops)
-        self.serial = serial_loops(cp)
+        #: the kernels of this cloth run their loops in one thread (small cloths on the CPU: runtime.serial_loops;
+        #: parallel_from: the integrator's count, Integrator.parallel_from_cpu)
+        self.serial = serial_loops(cp, parallel_from)
         fp = self.fp
         blk = FieldBlock()
         self.n_particles = blk.scalar(ti.i32, ())

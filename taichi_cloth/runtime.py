@@ -1,11 +1,15 @@
 """Taichi start-up and kernel-compile accounting.
 
 `init` starts Taichi once per process (re-initialising frees every field and costs seconds).
-`serial_loops(n)` says whether the kernels of a cloth of n particles should run their loops in one thread: on the
-CPU a parallel loop costs more to dispatch than a small pass costs to run, so below `parallel_from` particles
-(4096 by default; `init(..., parallel_from=n)` or the environment variable TAICHI_CLOTH_PARALLEL_FROM) serial
-loops are faster (the measurements behind 4096: docs/performance.md, "Why the defaults are what they are"). A GPU
-runs every loop in parallel.
+`serial_loops(n, default)` says whether the kernels of a cloth of n particles should run their loops in one thread:
+on the CPU a parallel loop costs more to dispatch than a small pass costs to run, so below a particle count serial
+loops are faster. Where that count lies depends on the integrator: the explicit family runs a frame in a few fused
+launches that do real work per particle (PARALLEL_FROM_CPU, 4096), while a solve launches ten or more short loops
+per CG iteration and gains nothing from a second core up to tens of thousands of particles
+(PARALLEL_FROM_CPU_SOLVE, 65536; each integrator names its own as `parallel_from_cpu`). `init(...,
+parallel_from=n)` or the environment variable TAICHI_CLOTH_PARALLEL_FROM sets one count for every integrator. The
+measurements behind both: docs/performance.md, "Why the defaults are what they are". A GPU runs every loop in
+parallel.
 Taichi writes the kernels it compiled into its offline cache only when its runtime is finalised (ti.reset or a
 new ti.init), which a plain interpreter exit does not do: `init` registers that at exit (without it every scene
 after a process's first compiled its kernels again in every run).
@@ -28,8 +32,10 @@ from clothbase.errors import warn
 _ARCHS = {"cpu": ti.cpu, "gpu": ti.gpu, "cuda": ti.cuda, "vulkan": ti.vulkan}
 _current_arch: str | None = None
 _saves_cache_at_exit = False
-#: particles from which the CPU runs a cloth's loops in parallel (see the module docstring)
+#: particles from which the CPU runs a cloth's loops in parallel (see the module docstring): the explicit family's
 PARALLEL_FROM_CPU = 4096
+#: ... and the implicit solves' (their CG iterations launch many short loops)
+PARALLEL_FROM_CPU_SOLVE = 65536
 _parallel_from: int | None = None
 
 
@@ -38,7 +44,8 @@ def init(arch: str = "cpu", parallel_from: int | None = None, **kwargs) -> None:
 
     Calling it again with the same arch does nothing; a different arch re-initialises Taichi
     (which frees all fields: do it before building scenes). `parallel_from`: the particle count from which
-    the CPU runs a cloth's loops in parallel (default PARALLEL_FROM_CPU, or TAICHI_CLOTH_PARALLEL_FROM).
+    the CPU runs a cloth's loops in parallel, for every integrator (default: TAICHI_CLOTH_PARALLEL_FROM, else
+    each integrator's own, see serial_loops).
     Extra keyword arguments go to ti.init.
     """
     global _current_arch, _parallel_from
@@ -103,13 +110,15 @@ def gpu_arch():
     return ti.cpu
 
 
-def serial_loops(n_particles: int) -> bool:
-    """Whether a cloth of n_particles should run its kernels' loops in one thread (CPU, below parallel_from)."""
+def serial_loops(n_particles: int, default: int = PARALLEL_FROM_CPU) -> bool:
+    """Whether a cloth of n_particles should run its kernels' loops in one thread: on the CPU, below `default`
+    particles (the integrator's parallel_from_cpu), or below the count init(parallel_from=...) or
+    TAICHI_CLOTH_PARALLEL_FROM set for every integrator."""
     if impl.current_cfg().arch != ti.cpu:
         return False
     threshold = _parallel_from
     if threshold is None:
-        threshold = int(os.environ.get("TAICHI_CLOTH_PARALLEL_FROM", PARALLEL_FROM_CPU))
+        threshold = int(os.environ.get("TAICHI_CLOTH_PARALLEL_FROM", default))
     return n_particles < threshold
 
 

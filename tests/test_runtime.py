@@ -18,3 +18,19 @@ def test_a_stale_kernel_cache_lock_is_removed_and_a_fresh_one_kept(tmp_path):
         clear_stale_cache_lock(tmp_path)
     assert not lock.exists()
     clear_stale_cache_lock(tmp_path)  # no lock: nothing to do
+
+
+@pytest.mark.parametrize("integrator, serial", [("explicit", False), ("implicit", True), ("approx-implicit", True)])
+def test_a_solve_runs_its_loops_in_one_thread_where_a_fused_explicit_step_does_not(integrator, serial, monkeypatch):
+    """4,900 particles, between the explicit family's count (4,096) and the solves' (65,536): a solve's loops run in
+    one thread on the CPU, the explicit step's in parallel; TAICHI_CLOTH_PARALLEL_FROM sets one count for all.
+    Building the scene compiles nothing."""
+    import taichi_cloth as tc
+    from taichi_cloth.runtime import PARALLEL_FROM_CPU, PARALLEL_FROM_CPU_SOLVE
+
+    monkeypatch.delenv("TAICHI_CLOTH_PARALLEL_FROM", raising=False)
+    cloth = tc.ClothBuilder.grid((1.0, 1.0), (70, 70), material="cotton")
+    assert PARALLEL_FROM_CPU < cloth.n_particles < PARALLEL_FROM_CPU_SOLVE
+    assert tc.Scene(cloth, integrator=integrator, dt=5e-5).model.serial is serial
+    monkeypatch.setenv("TAICHI_CLOTH_PARALLEL_FROM", "100000")
+    assert tc.Scene(cloth, integrator=integrator, dt=5e-5).model.serial is True

@@ -30,6 +30,7 @@ import taichi as ti
 from clothbase.errors import warn
 from clothbase.fields import FieldBlock
 
+from ..runtime import PARALLEL_FROM_CPU_SOLVE
 from .base import Integrator, Option, at_least_one
 
 
@@ -37,6 +38,7 @@ from .base import Integrator, Option, at_least_one
 class ApproxImplicit(Integrator):
     name = "approx-implicit"
     unconditionally_stable = True
+    parallel_from_cpu = PARALLEL_FROM_CPU_SOLVE  # a solve's many short loops gain little from threads
     OPTIONS = {
         "sweeps": Option(int, 2, "Jacobi sweeps per step (2 is the published form)", at_least_one),
         "warm_start": Option(bool, False, "start the sweeps from the previous step's dv instead of 0"),

@@ -8,6 +8,7 @@ from typing import Any, Callable, ClassVar
 import taichi as ti
 
 from ..contacts import require_bound
+from ..runtime import PARALLEL_FROM_CPU
 
 
 @dataclass(frozen=True)
@@ -50,6 +51,9 @@ class Integrator:
     #: True when v is the motion over the last step, (x - x_prev) / h: half a step behind the positions, so a
     #: measurement adds half a step of acceleration to read the velocity at the positions' time (the explicit family)
     staggered_velocity: ClassVar[bool] = False
+    #: particles from which a cloth stepped by this integrator runs its loops in parallel on the CPU
+    #: (runtime.serial_loops; the model is built with it)
+    parallel_from_cpu: ClassVar[int] = PARALLEL_FROM_CPU
 
     def __init__(self, model, state, forces, contacts=None, **options):
         self.model, self.state, self.forces = model, state, forces

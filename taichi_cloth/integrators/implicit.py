@@ -37,6 +37,7 @@ from clothbase.errors import warn
 from clothbase.fields import FieldBlock
 
 from ..linear import PCG, PRECONDITIONERS, BlockSystem, ConstraintFilter, PreconditionerPolicy
+from ..runtime import PARALLEL_FROM_CPU_SOLVE
 from .base import Integrator, Option, at_least_one, one_of, positive
 
 
@@ -44,6 +45,7 @@ from .base import Integrator, Option, at_least_one, one_of, positive
 class Implicit(Integrator):
     name = "implicit"
     unconditionally_stable = True
+    parallel_from_cpu = PARALLEL_FROM_CPU_SOLVE  # a solve's many short loops gain little from threads
     OPTIONS = {
         "cg_tolerance": Option(float, 1e-3, "relative CG residual (preconditioned norm) to stop at", positive),
         "cg_max_iterations": Option(int, 200, "CG iteration cap per step, shared by its Newton iterations",
