@@ -84,6 +84,7 @@ class MeshCollider(ParticleCollider):
         self.vertices_np = v
         self._attached = False
         self.repulsion = Repulsion(self, **repulsion) if repulsion else None
+        self._last_distance = None  # (vertices_np, points, signed distances) of the last signed_distance call
 
     # ------------------------------------------------------------------ body motion
     def set_vertices(self, vertices) -> None:
@@ -317,11 +318,17 @@ class MeshCollider(ParticleCollider):
     def signed_distance(self, points) -> np.ndarray:
         """Signed distance [m] of points (N,3) to the body surface, negative inside: exact point-triangle
         distance, sign from the generalised winding number. Brute force O(N T) in one kernel, for tests and
-        end-of-run metrics (about a second for 16k points on the mannequin here), never per step."""
+        end-of-run metrics, never per step: 1.6 s for 5,000 points on the mannequin's 26,756 triangles on the 2-core
+        CPU. The last answer is kept, so the end of a run, which asks for the same positions twice (the run
+        summary's agreement of stretch limit and body, the garment's quality table), pays once."""
         pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+        last = self._last_distance
+        if last is not None and last[0] is self.vertices_np and np.array_equal(last[1], pts):
+            return last[2].copy()
         out = np.zeros(len(pts), np.float64)
         if len(pts):
             self._signed_distance(pts, out)
+        self._last_distance = (self.vertices_np, pts.copy(), out.copy())  # the body as it was (set_vertices replaces it)
         return out
 
     @ti.kernel

@@ -307,3 +307,16 @@ def test_a_particle_never_crosses_a_thin_plate(mode):
                     if lowest < 0.005:  # below the top face
                         crossed.append((dt, angle, speed, height, lowest))
     assert not crossed
+
+
+def test_signed_distance_to_a_box_is_exact_and_follows_a_moved_body():
+    """A 0.3 m box: analytic distances outside and inside (negative); asked again for the same points the answer
+    is the same array, and after set_vertices moves the body by 0.1 m it is computed afresh."""
+    box = trimesh.creation.box(extents=(0.3, 0.3, 0.3))
+    body = MeshCollider(box.vertices, box.faces, thickness=0.003, source="box")
+    pts = np.array([[0.25, 0.0, 0.0], [0.0, 0.0, 0.05], [0.25, 0.25, 0.0]])
+    expected = np.array([0.1, -0.1, np.sqrt(2) * 0.1])
+    np.testing.assert_allclose(body.signed_distance(pts), expected, atol=1e-9)
+    np.testing.assert_array_equal(body.signed_distance(pts), body.signed_distance(pts.copy()))
+    body.set_vertices(box.vertices + [0.1, 0.0, 0.0])
+    np.testing.assert_allclose(body.signed_distance(pts), [0.0, -0.05, 0.1], atol=1e-9)
