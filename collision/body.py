@@ -328,7 +328,7 @@ class MeshCollider(ParticleCollider):
         out = np.zeros(len(pts), np.float64)
         if len(pts):
             self._signed_distance(pts, out)
-        self._last_distance = (self.vertices_np, pts.copy(), out.copy())  # the body as it was (set_vertices replaces it)
+        self._last_distance = (self.vertices_np, pts.copy(), out.copy())  # set_vertices replaces vertices_np
         return out
 
     @ti.kernel
