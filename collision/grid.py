@@ -88,6 +88,8 @@ class VoxelGrid:
             raise ValueError(f"voxel grid needs {total} triangle-cell pairs, capacity {self.pair_capacity}: "
                              "build the collider again (or use a larger cell size)")
         self._fill()
+        if not self.serial:
+            self._sort_cells()
         self.n_pairs = total
         return total
 
@@ -164,6 +166,23 @@ class VoxelGrid:
                 cell = self.cell_index(ti.Vector([i, j, k]))
                 slot = ti.atomic_add(self.cell_count[cell], 1)
                 self.cell_triangles[self.cell_start[cell] + slot] = t
+
+    @ti.kernel
+    def _sort_cells(self):
+        """Each cell's triangles in ascending index: a parallel fill appends them in the order threads arrive, and
+        the collision stage's ranked tests visit candidates in list order, so without this two runs of one scene
+        differ (insertion sort: a cell holds a few triangles)."""
+        for c in range(self.n_cells):
+            begin, end = self.cell_start[c], self.cell_start[c + 1]
+            for a in range(begin + 1, end):
+                t = self.cell_triangles[a]
+                b = a - 1
+                while b >= begin:
+                    if self.cell_triangles[b] <= t:
+                        break
+                    self.cell_triangles[b + 1] = self.cell_triangles[b]
+                    b -= 1
+                self.cell_triangles[b + 1] = t
 
     # ------------------------------------------------------------------ host-side inspection (tests)
     # (dense grids only)
