@@ -4,8 +4,8 @@
 `serial_loops(n, default)` says whether the kernels of a cloth of n particles should run their loops in one thread:
 on the CPU a parallel loop costs more to dispatch than a small pass costs to run, so below a particle count serial
 loops are faster. Where that count lies depends on the integrator: the explicit family runs a frame in a few fused
-launches that do real work per particle (PARALLEL_FROM_CPU, 4096), while a solve launches ten or more short loops
-per CG iteration and gains nothing from a second core up to tens of thousands of particles
+launches that do real work per particle (PARALLEL_FROM_CPU, 4096), while a solve launches several short loops per
+CG iteration, bound by memory, and on the 2-core CPU gained nothing from the second core up to 66k particles
 (PARALLEL_FROM_CPU_SOLVE, 65536; each integrator names its own as `parallel_from_cpu`). `init(...,
 parallel_from=n)` or the environment variable TAICHI_CLOTH_PARALLEL_FROM sets one count for every integrator. The
 measurements behind both: docs/performance.md, "Why the defaults are what they are". A GPU runs every loop in
