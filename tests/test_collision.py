@@ -20,17 +20,23 @@ def random_mesh(rng, n=60):
     return v, np.arange(3 * n).reshape(n, 3)
 
 
-@pytest.mark.parametrize("seed", [0, 1, 2])
-def test_grid_bins_exactly_what_brute_force_finds(seed):
-    """Every cell holds exactly the triangles whose padded bounding box overlaps the cell."""
-    rng = np.random.default_rng(seed)
-    v, t = random_mesh(rng)
+def mesh_fields(v, t):
+    """Taichi fields of a triangle soup for a VoxelGrid: vertices (f32), triangles, the live triangle count."""
     verts = ti.Vector.field(3, ti.f32, len(v))
     tris = ti.Vector.field(3, ti.i32, len(t))
     count = ti.field(ti.i32, ())
     verts.from_numpy(v.astype(np.float32))
     tris.from_numpy(t.astype(np.int32))
     count[None] = len(t)
+    return verts, tris, count
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_grid_bins_exactly_what_brute_force_finds(seed):
+    """Every cell holds exactly the triangles whose padded bounding box overlaps the cell."""
+    rng = np.random.default_rng(seed)
+    v, t = random_mesh(rng)
+    verts, tris, count = mesh_fields(v, t)
     cell, pad = [0.04, 0.07, 0.15][seed], 0.005
     grid = VoxelGrid(verts, tris, count, cell, pad, margin=0.02, vertices_np=v, triangles_np=t)
     origin = grid.origin.to_numpy().astype(np.float64)
@@ -56,12 +62,7 @@ def test_a_parallel_grid_lists_each_cell_in_ascending_triangle_order():
     without the sort two builds (two runs of a scene) could list a cell's triangles in different orders, and the
     collision stage visits candidates in list order. (Without the sort this failed in every run tried.)"""
     v, t = random_mesh(np.random.default_rng(3), n=200000)
-    verts = ti.Vector.field(3, ti.f32, len(v))
-    tris = ti.Vector.field(3, ti.i32, len(t))
-    count = ti.field(ti.i32, ())
-    verts.from_numpy(v.astype(np.float32))
-    tris.from_numpy(t.astype(np.int32))
-    count[None] = len(t)
+    verts, tris, count = mesh_fields(v, t)
     grid = VoxelGrid(verts, tris, count, 0.25, 0.005, margin=0.02, vertices_np=v, triangles_np=t)
     for build in range(3):  # thread timing decides the order of an unsorted fill: one build may come out sorted
         if build:
