@@ -20,7 +20,9 @@ from clothbase.fields import FieldBlock
 class Contacts:
     """normal: (P,) vec3 fp, the unit contact normal of each particle touched in the last step (0 if none);
     friction: (P,) fp, the Coulomb coefficient of that contact; stuck: (P,) i32, 1 where the integrator holds the
-    particle by static friction this step (every direction filtered)."""
+    particle by static friction this step (every direction filtered); released: (P,) i32, 1 where the integrator
+    lets a touching particle leave the body this step (the force pulls it away: no direction filtered). The normal
+    of a released particle stays as the colliders wrote it: the stretch limit still sees it on the body."""
 
     def __init__(self, model):
         self.model = model
@@ -28,6 +30,7 @@ class Contacts:
         self.normal = blk.vector(3, model.fp, model.capacity[0])
         self.friction = blk.scalar(model.fp, model.capacity[0])
         self.stuck = blk.scalar(ti.i32, model.capacity[0])
+        self.released = blk.scalar(ti.i32, model.capacity[0])
         self.friction_scale = blk.scalar(model.fp, ())  # 0 switches friction off (sewing: pieces slide into place)
         blk.finalize(self)
         self.friction_scale[None] = 1.0
@@ -45,14 +48,23 @@ class Contacts:
         ti.loop_config(serialize=self.model.serial)
         for i in range(self.model.n_particles[None]):
             self.normal[i] = ti.Vector.zero(self.model.fp, 3)
+            self.released[i] = 0
             if held != 0:
                 self.stuck[i] = 0
 
     @ti.func
+    def sliding_normal(self, i):
+        """The normal the solve filters for particle i: its contact normal, or 0 when it has none or is released."""
+        n = self.normal[i]
+        if self.released[i] != 0:
+            n = ti.Vector.zero(self.model.fp, 3)
+        return n
+
+    @ti.func
     def projector(self, i):
         """Particle i's filter S_i (3x3): 0 when stuck, I - n n^T / |n|^2 on a contact (divided by |n|^2: a normal
-        written in float32 is unit only to 1e-7, and S must be a projector), else I."""
-        n = self.normal[i]
+        written in float32 is unit only to 1e-7, and S must be a projector), else I (no contact, or released)."""
+        n = self.sliding_normal(i)
         nn = n.dot(n)
         S = ti.Matrix.identity(self.model.fp, 3)
         if self.stuck[i] != 0:

@@ -305,7 +305,7 @@ class SpringMultigrid:
                     if ti.static(filt.has_contacts):
                         if filt.contacts.stuck[i] != 0:
                             fixed = 1
-                        n = ti.cast(filt.contacts.normal[i], self.fp)
+                        n = ti.cast(filt.contacts.sliding_normal(i), self.fp)
                         if n.dot(n) > 0:
                             nrm = n / n.norm()
                 self.pin[g] = fixed
