@@ -28,6 +28,13 @@ def quiet():
         yield
 
 
+def sliding_normals(contacts, n: int) -> np.ndarray:
+    """(n,3) the contact normals the implicit solve filters: a particle's normal, or 0 where it has none or where
+    the step released it from the body (Contacts.released)."""
+    released = contacts.released.to_numpy()[:n] != 0
+    return np.where(released[:, None], 0.0, contacts.normal.to_numpy()[:n])
+
+
 def grid_top_corners(n: int) -> list[int]:
     """Indices of the two top corners of an n x n grid built in the xy plane (v up)."""
     return [n * (n - 1), n * n - 1]
