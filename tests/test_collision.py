@@ -382,31 +382,3 @@ def test_a_particle_the_solve_releases_from_the_body_stays_fixed_for_the_stretch
     np.testing.assert_allclose(normals[bottom], [[0.0, 1.0, 0.0]] * 3, atol=1e-6)
     assert (x_solve[middle, 1] - x_solve[bottom, 1]).min() > 1.2 * 0.02  # still over the limit after the solve
     np.testing.assert_array_equal(x_limit[bottom], x_solve[bottom])
-
-
-def test_a_released_contact_never_leaves_the_solve_moving_into_the_body():
-    """A cotton sheet dropped on a ball: particles the implicit step releases (the force at the step's start pulls
-    them off the ball) must not come out of the solve moving into it. Without the one-sided correction the solve
-    sent them in at up to 0.35 m/s; the collider pushed them back out, and the next step released them again
-    (a cycle of three steps that kept a 1 cm T-shirt from resting)."""
-    from taichi_cloth.control import Controller
-
-    cloth = tc.ClothBuilder.grid((0.6, 0.6), (16, 16), material="cotton", center=(0.0, 0.33, 0.0), plane="xz")
-    sc = tc.Scene(cloth, integrator="implicit", dt=1 / 120, air_damping=0.5,
-                  colliders=[{"type": "sphere", "center": [0, 0, 0], "radius": 0.3, "thickness": 0.004,
-                              "friction": 0.4}],
-                  stretch_limit={"max_strain": 0.1, "iterations": 20})
-    normal_speeds = []
-
-    class AfterTheSolve(Controller):
-        def after_step(self, t, dt):
-            released = sc.contacts.released.to_numpy() != 0
-            n = sc.contacts.normal.to_numpy()[released]
-            v = sc.velocities()[released]
-            normal_speeds.extend(np.einsum("ij,ij->i", v, n / np.linalg.norm(n, axis=1)[:, None]))
-
-    sc.controllers.insert(0, AfterTheSolve())
-    sc.add_controller(Controller())  # rebinds the hooks, the probe's included
-    sc.run(120, progress=False)
-    assert len(normal_speeds) >= 100  # the ball releases particles step after step
-    assert min(normal_speeds) >= -1e-6  # float32 round-off of the normal and the velocity

@@ -410,11 +410,7 @@ class Implicit(Integrator):
 
     @ti.kernel
     def _finish(self, dt: ti.f64):
-        """v = v0 + dv_total, x = x0 + h v (pinned particles keep their start; the pins place the moving ones). A
-        contact released before the solve (the force at the step's start pulled it away) that the solve moved into
-        the body loses that normal velocity: the release holds for leaving only. Without it, its neighbours pulled
-        such a particle 0.4 mm in, the collider pushed it back out, and it was released again, in a cycle of three
-        steps that kept a 1 cm T-shirt from resting."""
+        """v = v0 + dv_total, x = x0 + h v (pinned particles keep their start; the pins place the moving ones)."""
         m, s = self.model, self.state
         h = ti.cast(dt, m.fp)
         ti.loop_config(serialize=self.model.serial)
@@ -423,11 +419,6 @@ class Implicit(Integrator):
             x = self.x0[i]
             if m.inv_mass[i] != 0:
                 v += self.dv_total[i]
-                if ti.static(self.has_contacts):
-                    n = self.contacts.normal[i]
-                    if self.contacts.released[i] != 0 and n.dot(n) > 0:
-                        n = n.normalized()
-                        v -= ti.min(v.dot(n), 0.0) * n
                 x += h * v
             s.v[i] = v
             s.x[i] = x
