@@ -6,6 +6,11 @@ from clothbase.fields import FieldBlock
 #: a particle up to this fraction of a collider's thickness beyond it still counts as in contact: it rests where
 #: the last push left it (recorded for the implicit integrators' friction, not pushed)
 BAND = 0.25
+#: the band of a particle that was in contact in the last step: wider, so that a particle resting at the band's edge
+#: does not leave and touch again every other step (hysteresis). A skirt's waist particle 5.07 mm from the body
+#: (thickness 4 mm) left the band, the stretch limit then moved it as a free particle 0.6 mm towards a neighbour held
+#: on the body, the solve brought it back into the band, in a cycle of three steps for as long as the run lasted
+BAND_HELD = 0.5
 
 
 @ti.data_oriented
@@ -16,16 +21,19 @@ class ParticleCollider:
     """Base of the colliders. After `attach`, x, v [m, m/s] and inv_mass [1/kg] are the cloth's (P,) fields,
     n_particles its 0-d live count, x_start (P,) the positions at the start of the step, and contact_normal,
     contact_friction (optional (P,) fields) receive the unit normal and the friction coefficient of each contact
-    made, for the implicit integrators (record_contact)."""
+    made, for the implicit integrators (record_contact); contact_before (optional (P,) i32 field) is 1 where a
+    particle had a contact in the last step (its band is then BAND_HELD)."""
 
     def attach(self, x, v, inv_mass, n_particles, contact_normal=None, serial: bool = False,
-               contact_friction=None) -> None:
+               contact_friction=None, contact_before=None) -> None:
         self.x, self.v, self.inv_mass, self.n_particles = x, v, inv_mass, n_particles
         self.serial = bool(serial)
         self.contact_normal = contact_normal
         self.contact_friction = contact_friction
+        self.contact_before = contact_before
         self.records_contacts = contact_normal is not None
         self.records_friction = contact_friction is not None
+        self.knows_before = contact_before is not None
         blk = FieldBlock()
         self.x_start = blk.vector(3, x.dtype, x.shape[0])
         blk.finalize(self)
@@ -45,6 +53,16 @@ class ParticleCollider:
         ti.loop_config(serialize=self.serial)
         for i in range(self.n_particles[None]):
             self.x_start[i] = self.x[i]
+
+    @ti.func
+    def band(self, i):
+        """Particle i's contact band, as a fraction of the thickness: BAND, or BAND_HELD where it touched in the
+        last step."""
+        b = ti.cast(BAND, ti.f32)
+        if ti.static(self.knows_before):
+            if self.contact_before[i] != 0:
+                b = ti.cast(BAND_HELD, ti.f32)
+        return b
 
     @ti.func
     def record_contact(self, i, normal, friction):

@@ -19,7 +19,7 @@ import taichi as ti
 from clothbase.fields import FieldBlock
 from clothbase.meshes import validate_triangle_mesh
 
-from .base import BAND, ParticleCollider
+from .base import BAND_HELD, ParticleCollider
 from .geometry import closest_point_on_triangle, collision_possibility, inside_triangle, segment_triangle, solid_angle
 from .grid import VoxelGrid
 
@@ -234,7 +234,7 @@ class MeshCollider(ParticleCollider):
         # the gap is at least the plane distance: far planes are culled before the closest-point computation. The
         # nearest face decides, in front of it or behind: a point just above a thin plate is also behind the plate's
         # underside, and taking that for "inside" pushed it through (a 1 cm slab crossed by every glide)
-        if ti.abs(plane) < reach + BAND * ti.cast(self.thickness, ti.f32):  # reach: at least the thickness
+        if ti.abs(plane) < reach + BAND_HELD * ti.cast(self.thickness, ti.f32):  # reach: at least the thickness
             gap = plane
             direction = nrm
             if not inside_triangle(qf, v0, v1, v2, nrm):
@@ -294,7 +294,7 @@ class MeshCollider(ParticleCollider):
                         # too close: away from the closest point of the surface, to the thickness
                         contacts += 1
                         push = (ti.cast(thickness, ti.f32) - gap) * direction
-                    elif near >= 0 and gap < (1 + BAND) * ti.cast(thickness, ti.f32):
+                    elif near >= 0 and gap < (1 + self.band(i)) * ti.cast(thickness, ti.f32):
                         # within the contact band: a contact for the solve (its friction), nothing to push
                         self.record_contact(i, ti.cast(direction, self.x.dtype), ti.cast(friction, self.x.dtype))
                         break

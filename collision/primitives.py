@@ -12,7 +12,7 @@ import taichi as ti
 
 from clothbase.fields import FieldBlock
 
-from .base import BAND, ParticleCollider
+from .base import ParticleCollider
 
 
 @ti.func
@@ -105,6 +105,7 @@ class PrimitiveColliders(ParticleCollider):
             p = ti.cast(start, ti.f32)
             q = ti.cast(self.x[i], ti.f32)
             rp = ti.cast(self.thickness, ti.f32)
+            band_width = self.band(i) * rp
             for k in range(self.n_spheres):  # tunnelling first: stop at the entry point
                 q = self._entry(p, q, self.sphere[k].xyz, self.sphere[k].w + rp)
             for k in range(self.n_capsules):
@@ -120,7 +121,7 @@ class PrimitiveColliders(ParticleCollider):
                 dist = d.norm()
                 if dist <= reach:
                     push += self.alpha * (reach - dist) * d.normalized(1e-20)
-                if dist <= reach + BAND * rp:
+                if dist <= reach + band_width:
                     band += d.normalized(1e-20)
             for k in range(self.n_capsules):
                 c = _closest_on_segment(q, self.capsule_a[k].xyz, self.capsule_b[k])
@@ -129,7 +130,7 @@ class PrimitiveColliders(ParticleCollider):
                 dist = d.norm()
                 if dist <= reach:
                     push += self.alpha * (reach - dist) * d.normalized(1e-20)
-                if dist <= reach + BAND * rp:
+                if dist <= reach + band_width:
                     band += d.normalized(1e-20)
             for k in range(self.n_planes):
                 pt = ti.Vector([self.plane[k][0], self.plane[k][1], self.plane[k][2]])
@@ -137,7 +138,7 @@ class PrimitiveColliders(ParticleCollider):
                 dist = (q + push - pt).dot(nrm)
                 if dist < rp:
                     push += (rp - dist) * nrm
-                if dist < (1 + BAND) * rp:
+                if dist < rp + band_width:
                     band += nrm
             moved = (q + push) - ti.cast(self.x[i], ti.f32)
             friction = ti.cast(self.friction, self.x.dtype)

@@ -99,7 +99,7 @@ class Colliders(Controller):
         self.moving: set[int] = set()
         for c in self.objects:
             c.attach(state.x, state.v, model.inv_mass, model.n_particles, contacts.normal, model.serial,
-                     contacts.friction)
+                     contacts.friction, contacts.before)
 
     @property
     def thickness(self) -> float | None:

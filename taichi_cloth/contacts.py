@@ -22,7 +22,8 @@ class Contacts:
     friction: (P,) fp, the Coulomb coefficient of that contact; stuck: (P,) i32, 1 where the integrator holds the
     particle by static friction this step (every direction filtered); released: (P,) i32, 1 where the integrator
     lets a touching particle leave the body this step (the force pulls it away: no direction filtered). The normal
-    of a released particle stays as the colliders wrote it: the stretch limit still sees it on the body."""
+    of a released particle stays as the colliders wrote it: the stretch limit still sees it on the body. before:
+    (P,) i32, 1 where the particle had a contact after the step before (the colliders give it a wider band)."""
 
     def __init__(self, model):
         self.model = model
@@ -31,6 +32,7 @@ class Contacts:
         self.friction = blk.scalar(model.fp, model.capacity[0])
         self.stuck = blk.scalar(ti.i32, model.capacity[0])
         self.released = blk.scalar(ti.i32, model.capacity[0])
+        self.before = blk.scalar(ti.i32, model.capacity[0])
         self.friction_scale = blk.scalar(model.fp, ())  # 0 switches friction off (sewing: pieces slide into place)
         blk.finalize(self)
         self.friction_scale[None] = 1.0
@@ -47,6 +49,8 @@ class Contacts:
     def _clear(self, held: ti.i32):
         ti.loop_config(serialize=self.model.serial)
         for i in range(self.model.n_particles[None]):
+            n = self.normal[i]
+            self.before[i] = ti.cast(n.dot(n) > 0 and held == 0, ti.i32)
             self.normal[i] = ti.Vector.zero(self.model.fp, 3)
             self.released[i] = 0
             if held != 0:

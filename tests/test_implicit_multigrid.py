@@ -36,7 +36,8 @@ def filtered_solve(sc) -> np.ndarray:
     """dv of the first Newton iteration of a backward-Euler step of `sc` now (the Baraff-Witkin system), by scipy:
     the free directions Q (pins and contacts held by static friction: none, other contacts: the two tangents, a
     contact the step releases: all three),
-    dv = Q (Q^T A Q)^-1 Q^T b, with A and b built from the formulas, not from the engine's kernels. The step's
+    dv = Q (Q^T A Q)^-1 Q^T b, with A and b built from the formulas, not from the engine's kernels; then a released
+    contact that dv moves into the body is held (its new normal velocity removed: the step's active set). The step's
     friction, which changes velocities before the solve, is applied first (by the engine) and switched off for the
     step itself (solve_after_friction)."""
     sc.integrator._contact_friction(sc.dt)
@@ -67,7 +68,12 @@ def filtered_solve(sc) -> np.ndarray:
             columns.append(col)
     Q = np.array(columns).T
     y = np.linalg.solve(Q.T @ A @ Q, Q.T @ rhs)
-    return (Q @ y).reshape(-1, 3)
+    dv = (Q @ y).reshape(-1, 3)
+    contact = sc.contacts.normal.to_numpy()[: d.n_particles].astype(np.float64)
+    for i in np.flatnonzero(sc.contacts.released.to_numpy()[: d.n_particles] != 0):
+        n = contact[i] / np.linalg.norm(contact[i])
+        dv[i] -= min((v[i] + dv[i]) @ n, 0.0) * n
+    return dv
 
 
 def solve_after_friction(sc) -> None:
