@@ -10,6 +10,7 @@ from .agreement import limit_and_colliders
 from .diagnostics import Measurement
 from .errors import BlowUpError
 from .frame import scene_layout, scene_snapshot
+from .self_intersection import IntersectionCount
 from .summary import RunSummary
 
 
@@ -19,15 +20,18 @@ class FrameLog:
     With a `progress` name it shows a progress bar over the frames."""
 
     def __init__(self, recorder, entity: str, record_every: int, frames: int, summary: RunSummary,
-                 progress: str | None = None):
+                 progress: str | None = None, intersections: IntersectionCount | None = None):
         self.recorder, self.entity, self.every = recorder, entity, record_every
-        self.frames, self.summary = frames, summary
+        self.frames, self.summary, self.intersections = frames, summary, intersections
         self.bar = tqdm(total=frames, unit="frame", desc=progress, leave=False) if progress is not None else None
 
     def begin(self, scene, translation) -> None:
         events = scene.collect_notes(self.summary)
         if self.recorder is not None:  # not in wall_record: like frame 1's steps, the start compiles (the normals)
-            self.recorder.begin_cloth(self.entity, scene_layout(scene), translation)
+            layout = scene_layout(scene)
+            if self.intersections is not None:
+                layout.series["intersections"] = "intersecting triangle pairs"
+            self.recorder.begin_cloth(self.entity, layout, translation)
             self.recorder.log_frame(self.entity, scene_snapshot(scene, 0, scene.measure(), events=events))
 
     def frame(self, scene, frame: int, m: Measurement, steps_per_s: float | None, new_topology: bool,
@@ -35,10 +39,16 @@ class FrameLog:
         if self.bar is not None:
             self.bar.update(1)
         events = scene.collect_notes(self.summary)
-        due = frame % self.every == 0 or frame == self.frames or last or events or new_topology
+        counted = None
+        if self.intersections is not None and self.intersections.due(frame):
+            counted = self.intersections.count(scene.positions(), scene.model.data.triangles, scene.state.t)
+        due = frame % self.every == 0 or frame == self.frames or last or events or new_topology or counted is not None
         if self.recorder is not None and due:
             t0 = time.perf_counter()
-            self.recorder.log_frame(self.entity, scene_snapshot(scene, frame, m, steps_per_s, events))
+            snap = scene_snapshot(scene, frame, m, steps_per_s, events)
+            if counted is not None:
+                snap.scalars["intersections"] = counted
+            self.recorder.log_frame(self.entity, snap)
             if frame > 1:
                 self.summary.wall_record += time.perf_counter() - t0
 
@@ -71,9 +81,10 @@ def open_summary(scene) -> tuple[RunSummary, tuple]:
     return summary, (scene.state.t, counters(scene), scene.clock.counters())
 
 
-def close_summary(scene, summary: RunSummary, start: tuple) -> None:
+def close_summary(scene, summary: RunSummary, start: tuple, intersections: IntersectionCount | None = None) -> None:
     """Fill the summary's closing lines: simulated time, the final counts, warnings, counters per step, the steps
-    taken, the rest status, and whether the stretch limit and the colliders agree."""
+    taken, the rest status, whether the stretch limit and the colliders agree, and the run's `intersections` with a
+    last count (unless it blew up)."""
     t_start, stats_start, clock_start = start
     summary.sim_time = scene.state.t - t_start
     summary.n_particles, summary.n_springs = scene.model.data.n_particles, scene.model.data.n_springs
@@ -87,3 +98,7 @@ def close_summary(scene, summary: RunSummary, start: tuple) -> None:
     limit, colliders = scene.controller("stretch_limit"), scene.controller("colliders")
     if limit is not None and colliders is not None:
         summary.agreement = limit_and_colliders(scene.model.data, scene.positions(), limit, colliders)
+    if intersections is not None and summary.blowup is None:
+        summary.intersections = intersections.count(scene.positions(), scene.model.data.triangles, scene.state.t)
+        summary.intersections_max = intersections.largest
+        summary.self_intersection = intersections.describe()

@@ -33,6 +33,9 @@ class RunSummary:
     rest: str | None = None  # the rest criterion at the last frame (taichi_cloth.rest), in words
     stopped_at_rest: bool = False  # the run ended early because the cloth was at rest
     agreement: str | None = None  # whether the stretch limit and the colliders both hold at the end, in words
+    intersections: int | None = None  # intersecting triangle pairs at the end (taichi_cloth.self_intersection)
+    intersections_max: int | None = None  # the largest count over the run's counts
+    self_intersection: str | None = None  # both, in words
     first_frame_wall: float = 0.0
     final: Measurement | None = None
     max_strain_seen: float = 0.0
@@ -109,6 +112,8 @@ class RunSummary:
             lines.append(f"  {self.rest}" + ("; the run stopped there" if self.stopped_at_rest else ""))
         if self.agreement is not None:
             lines.append(f"  {self.agreement}")
+        if self.self_intersection is not None:
+            lines.append(f"  {self.self_intersection}")
         for e in self.events:
             lines.append(f"  {e}")
         for k, v in self.stats.items():

@@ -140,3 +140,64 @@ def test_self_collision_follows_a_level_switch_without_compiling():
     assert cc.total == 0, cc.compiled
     assert sc.model.data.n_particles == len(cloth.levels[2].positions)
     assert count_intersecting_pairs(sc.positions(), sc.model.data.triangles) == 0
+
+
+# ---------------------------------------------------------------------- the count in the summary and the recording
+class _Snapshots:
+    """A recorder that keeps the snapshots it is given (the Recorder's interface, nothing written)."""
+
+    def __init__(self):
+        self.layout, self.snaps = None, []
+
+    def begin_cloth(self, entity, layout, translation=None):
+        self.layout = layout
+
+    def log_frame(self, entity, frame):
+        self.snaps.append(frame)
+
+    def log_events(self, entity, frame, t, events):
+        pass
+
+    def flush(self):
+        pass
+
+
+def test_the_run_summary_and_the_recording_count_the_intersecting_pairs():
+    """A sheet folded through itself, its rest shape that folded shape, no gravity: it stays put, so every count of
+    the run, in the recording every quarter second (15 frames at 60 fps) and in the summary at the end, is the exact
+    count of its pose (35 pairs; the folded half is shifted off the grid below it, so that no edge grazes a triangle
+    and the count is the same at any jitter under 1e-5 m)."""
+    sheet = tc.ClothBuilder.grid((1.0, 1.0), (10, 10))
+    x = sheet.positions.copy()
+    right = x[:, 0] > 0.1
+    x[right, 0] = 0.2137 - x[right, 0]
+    x[right, 1] += 0.0096
+    x[right, 2] = 0.05 - 0.2 * (x[right, 0] + 0.4)
+    a, b = sheet.springs[:, 0], sheet.springs[:, 1]
+    sheet.positions, sheet.rest_length = x, np.linalg.norm(x[b] - x[a], axis=1)
+    crossing = count_intersecting_pairs(x, sheet.triangles)
+    assert crossing == 35
+    sc = tc.Scene(sheet, integrator="explicit", dt=1 / 2400, gravity=(0.0, 0.0, 0.0), fps=60)
+    rec = _Snapshots()
+    summary = sc.run(30, recorder=rec, progress=False)
+    assert summary.intersections == summary.intersections_max == crossing
+    assert (f"self-intersection: {crossing} intersecting triangle pairs now, at most {crossing} (t = 0.250 s; "
+            "counted every 0.25 s and at the end)") in summary.format()
+    assert "intersections" in rec.layout.series
+    assert {s.frame: s.scalars["intersections"] for s in rec.snaps if "intersections" in s.scalars} == \
+        {15: crossing, 30: crossing}
+
+
+def test_the_largest_count_is_kept_with_its_time():
+    """A run's count keeps the largest of its counts and when it was seen, and counts every quarter second."""
+    from taichi_cloth.self_intersection import IntersectionCount
+
+    tri = np.array([[0, 1, 2], [3, 4, 5]])
+    crossed = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0.2, 0.2, -0.5], [0.3, 0.2, 0.5], [0.2, 0.3, 0.5]])
+    apart = crossed + np.array([[0, 0, 0]] * 3 + [[0, 0, 2]] * 3)
+    counts = IntersectionCount(fps=60)
+    assert counts.every == 15 and [f for f in range(1, 46) if counts.due(f)] == [15, 30, 45] and counts.now is None
+    assert counts.count(apart, tri, 0.25) == 0 and (counts.largest, counts.t_largest) == (0, 0.25)
+    assert counts.count(crossed, tri, 0.5) == 1
+    assert counts.count(apart, tri, 0.75) == 0
+    assert (counts.now, counts.largest, counts.t_largest, counts.counted) == (0, 1, 0.5, 3)

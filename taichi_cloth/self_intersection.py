@@ -1,0 +1,52 @@
+"""IntersectionCount: how many pairs of the cloth's triangles pass through each other, counted exactly during a run
+and at its end, for the run summary and the recording (part of a run's bookkeeping, like its speed figures).
+
+A drape can look right and still have a sleeve through the body of the shirt or a fold through itself; the count
+says so at a glance. The count is collision.intersections' (exact, triangles sharing no vertex, on the host), which
+is independent of the self-collision code. It costs too much for every frame (docs/collision.md, self-collision),
+so a run counts every `every` frames (a quarter of a simulated second by default) and once more at its end. The
+largest count is the largest of those: a crossing that opens and closes again between two counts is not seen.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from collision.intersections import count_intersecting_pairs
+
+#: simulated seconds between two counts during a run
+INTERVAL = 0.25
+
+
+class IntersectionCount:
+    """The counts of one run at `fps` frames per simulated second, every `every` frames (default: INTERVAL).
+
+    now:      the last count (None before the first)
+    largest:  the largest count so far, and t_largest [s] when it was seen
+    counted:  how many counts were made
+    """
+
+    def __init__(self, fps: float, every: int | None = None):
+        every = max(1, int(np.round(INTERVAL * fps))) if every is None else int(every)
+        if every < 1:
+            raise ValueError(f"every must be >= 1 frame, got {every}")
+        self.every, self.fps = every, float(fps)
+        self.now: int | None = None
+        self.largest, self.t_largest, self.counted = 0, 0.0, 0
+
+    def due(self, frame: int) -> bool:
+        """Whether the run counts after `frame` (1-based)."""
+        return frame % self.every == 0
+
+    def count(self, positions, triangles, t: float) -> int:
+        """Count the intersecting pairs of `triangles` (T,3) over `positions` (P,3) [m] at simulated time t [s], and
+        keep the largest."""
+        n = count_intersecting_pairs(positions, triangles)
+        self.now, self.counted = n, self.counted + 1
+        if self.counted == 1 or n > self.largest:
+            self.largest, self.t_largest = n, t
+        return n
+
+    def describe(self) -> str:
+        """The run summary's line, after a final count."""
+        return (f"self-intersection: {self.now} intersecting triangle pairs now, at most {self.largest} "
+                f"(t = {self.t_largest:.3f} s; counted every {self.every / self.fps:.3g} s and at the end)")
