@@ -75,6 +75,76 @@ class PrimitiveColliders(ParticleCollider):
     def resolve(self, dt: float) -> None:
         self._resolve()
 
+    def _on_attach(self) -> None:
+        blk = FieldBlock()
+        self.speculative = blk.scalar(ti.i32, self.x.shape[0])
+        blk.finalize(self)
+
+    def begin_step(self, dt: float | None = None) -> None:
+        """Remember where every particle starts the step; with the step dt [s], make the speculative contacts."""
+        self._copy_start()
+        if dt is not None:
+            self._speculate(dt)
+
+    @ti.func
+    def _touching(self, i):
+        """Whether particle i had a contact after the last step (always False without contact fields)."""
+        touching = False
+        if ti.static(self.records_contacts):
+            touching = self.contact_normal[i].norm() > 0
+        return touching
+
+    @ti.func
+    def _nearest(self, q):
+        """The gap [m] from q to the nearest shape's surface offset by the thickness (negative inside), and that
+        shape's outward unit normal."""
+        rp = ti.cast(self.thickness, ti.f32)
+        gap = ti.cast(1e30, ti.f32)
+        nrm = ti.Vector.zero(ti.f32, 3)
+        for k in range(self.n_spheres):
+            d = q - self.sphere[k].xyz
+            g = d.norm() - self.sphere[k].w - rp
+            if g < gap:
+                gap, nrm = g, d.normalized(1e-20)
+        for k in range(self.n_capsules):
+            d = q - _closest_on_segment(q, self.capsule_a[k].xyz, self.capsule_b[k])
+            g = d.norm() - self.capsule_a[k].w - rp
+            if g < gap:
+                gap, nrm = g, d.normalized(1e-20)
+        for k in range(self.n_planes):
+            n = ti.Vector([self.plane[k][3], self.plane[k][4], self.plane[k][5]])
+            g = (q - ti.Vector([self.plane[k][0], self.plane[k][1], self.plane[k][2]])).dot(n) - rp
+            if g < gap:
+                gap, nrm = g, n
+        return gap, nrm
+
+    @ti.kernel
+    def _speculate(self, dt: ti.f64):
+        """Speculative contacts: a free particle not in contact but moving fast enough to reach a shape within this
+        step of dt [s] has its approach cut to the speed that closes the gap in the step (with Coulomb friction for
+        that impulse), before the integrator's solve, so that the solve moves its neighbours with it. Pushed out
+        only after the step, it stopped on the surface while they fell on by up to a step's travel, and the
+        stretch of the springs between them was elastic energy from nowhere (docs/collision.md). No constraint
+        goes to the solve: holding the approach there let the constraint pull the particle in against its
+        neighbours, and a step gained energy."""
+        ti.loop_config(serialize=self.serial)
+        for i in range(self.n_particles[None]):
+            self.speculative[i] = 0
+            if self.inv_mass[i] != 0 and not self._touching(i):
+                h = ti.cast(dt, ti.f32)
+                gap, n = self._nearest(ti.cast(self.x[i], ti.f32))
+                v = ti.cast(self.v[i], ti.f32)
+                vn = v.dot(n)
+                if gap > 0 and gap + vn * h < 0:
+                    target = -gap / h
+                    vt = v - vn * n
+                    vt_len = vt.norm()
+                    scale = ti.cast(0.0, ti.f32)
+                    if vt_len > 0:
+                        scale = ti.max(0.0, 1.0 - ti.cast(self.friction, ti.f32) * (target - vn) / vt_len)
+                    self.v[i] = ti.cast(target * n + scale * vt, self.x.dtype)
+                    self.speculative[i] = 1
+
     @ti.func
     def _entry(self, p, q, c, r):
         """If segment p -> q passes through the ball (c, r) with both ends outside, the entry point; else q."""
@@ -149,7 +219,11 @@ class PrimitiveColliders(ParticleCollider):
                     self.record_contact(i, nrm, friction)
                 self.respond(i, nrm, ti.Vector.zero(self.x.dtype, 3), friction)
             elif band.norm() > 0:  # resting just above a surface: a contact for the solve, nothing to undo
-                self.record_contact(i, ti.cast(band.normalized(1e-20), self.x.dtype), friction)
+                nrm = ti.cast(band.normalized(1e-20), self.x.dtype)
+                self.record_contact(i, nrm, friction)
+                if self.speculative[i] != 0:  # arrived at the surface: the rest of its approach ends here
+                    self.respond(i, nrm, ti.Vector.zero(self.x.dtype, 3), friction)
+            self.speculative[i] = 0
 
     def signed_distance(self, points) -> np.ndarray:
         """Signed distance [m] of points (N,3) to the union of the shapes, negative inside."""

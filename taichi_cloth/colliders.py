@@ -135,12 +135,17 @@ class Colliders(Controller):
         when a body mesh or self-collision is among the colliders."""
         return tuple(self.objects) if all(isinstance(c, PrimitiveColliders) for c in self.objects) else None
 
-    def begin(self, state, contacts) -> None:
+    def begin(self, state, contacts, dt: float | None = None) -> None:
         """A step of `state` begins: every collider remembers where the particles start (its crossing tests run
-        from there). state and contacts: those the colliders were built for (another raises ValueError)."""
+        from there); with the step dt [s], the primitive colliders also cut the approach of the particles that would
+        reach them within it (speculative contacts, collision.primitives). state and contacts: those the colliders
+        were built for (another raises ValueError)."""
         require_bound(self, state, contacts)
         for c in self.objects:
-            c.begin_step()
+            if isinstance(c, PrimitiveColliders):
+                c.begin_step(dt)
+            else:
+                c.begin_step()
 
     def collide(self, state, contacts, dt: float) -> None:
         """After a step of dt [s]: push the particles of `state` out of every collider and write `contacts` afresh

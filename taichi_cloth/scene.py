@@ -124,7 +124,9 @@ class Scene:
         for hook in self._before_step:
             hook(state.t, dt)
         if collision is not None:
-            collision.begin(state, contacts)
+            # speculative contacts for the long steps of the implicit integrators (an explicit step's push is short,
+            # and its fused steps resolve inline)
+            collision.begin(state, contacts, dt if type(self.integrator).unconditionally_stable else None)
         self.integrator.step(state, contacts, dt)
         if observe is not None:
             observe()
