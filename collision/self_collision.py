@@ -68,7 +68,7 @@ SEPARATION, FLOOR = 0.1, 0.05
 IMPULSE_PASSES, ZONE_PASSES = 16, 32
 #: the candidates gathered in a step serve the next steps while every particle stays within this many thicknesses
 #: of its motion in the step they were gathered (a calm cloth then skips the grid rebuild and the gathering)
-REUSE_MARGIN = 0.5
+REUSE_MARGIN = 0.25
 #: additive CCD iterations per pair at most (a pair sliding past at its contact distance takes ~ l_p / 0.9 d)
 CCD_ITERATIONS = 256
 
@@ -135,7 +135,7 @@ class SelfCollision(ParticleCollider):
         self.edge_full = blk.scalar(ti.i8, E)
         self.edges = blk.vector(2, ti.i32, E)
         self.triangle_edges = blk.vector(3, ti.i32, T)
-        self.box_lo = blk.vector(3, ti.f32, T)  # the triangles' padded swept boxes [m] of this step
+        self.box_lo = blk.vector(3, ti.f32, T)  # the boxes of the triangles' vertices' reaches [m] (_gather)
         self.box_hi = blk.vector(3, ti.f32, T)
         self.on_seam = blk.scalar(ti.i8, P)
         self.dx = blk.vector(3, self.x.dtype, P)
@@ -277,6 +277,13 @@ class SelfCollision(ParticleCollider):
                 and tri[2] != skip_a and tri[0] != skip_b and tri[1] != skip_b and tri[2] != skip_b)
 
     @ti.func
+    def _edge_near(self, f, lo, hi):
+        """Edge f's reach box (its ends' reaches) meets box [lo, hi]."""
+        q = self.edges[f]
+        return (all(ti.min(self.reach_lo[q[0]], self.reach_lo[q[1]]) <= hi)
+                and all(lo <= ti.max(self.reach_hi[q[0]], self.reach_hi[q[1]])))
+
+    @ti.func
     def _collect(self, lo, hi, row, cand: ti.template(), full: ti.template(), skip_a, skip_b, edges: ti.template()):
         """Gather into cand[row, :] the triangles whose padded swept boxes meet box [lo, hi] and have neither vertex
         skip_a nor skip_b, or with `edges`, the edges above `row` of those triangles; returns how many."""
@@ -291,7 +298,7 @@ class SelfCollision(ParticleCollider):
                     if ti.static(edges):
                         for j in ti.static(range(3)):
                             f = self.triangle_edges[t][j]
-                            if f > row:  # each pair once
+                            if f > row and self._edge_near(f, lo, hi):  # each pair once
                                 n = self._add(cand, full, row, n, f)
                     else:
                         n = self._add(cand, full, row, n, t)
@@ -299,19 +306,22 @@ class SelfCollision(ParticleCollider):
 
     @ti.kernel
     def _gather(self):
-        """Bin nothing (the grid is built), gather the candidates: each particle's reach is its motion over the step
-        (start to now) grown by REUSE_MARGIN thicknesses; a particle gathers the triangles whose boxes (the grid's:
-        swept, padded by (1 + REUSE_MARGIN) thicknesses, which holds their vertices' reaches padded by a thickness)
-        meet its reach padded by the thickness, an edge those meeting its ends' reaches so padded. While every
-        particle stays in its reach, every pair within a thickness of each other is among the candidates."""
+        """Gather the candidates (the grid is built): each particle's reach is its motion over the step (start to
+        now) grown by REUSE_MARGIN thicknesses, a triangle's box the box of its vertices' reaches; a particle gathers
+        the triangles whose boxes meet its reach padded by the thickness, an edge the edges whose reach boxes meet
+        its own so padded (found through the grid, whose cells hold the triangles' swept boxes padded by (1 +
+        REUSE_MARGIN) thicknesses: the triangles' boxes and more). While every particle stays in its reach, every
+        pair within a thickness of each other is among the candidates."""
         # in parallel even on a small cloth: a few milliseconds of work, against a dispatch of ~0.1 ms
         tau = ti.cast(self.tau[None], ti.f32)
         margin = ti.cast(REUSE_MARGIN, ti.f32) * tau
-        for t in range(self.n_triangles[None]):
-            self.box_lo[t], self.box_hi[t] = self.grid.triangle_box(t)
         for i in range(self.n_particles[None]):
             p0, p1 = ti.cast(self.x_start[i], ti.f32), ti.cast(self.x[i], ti.f32)
             self.reach_lo[i], self.reach_hi[i] = ti.min(p0, p1) - margin, ti.max(p0, p1) + margin
+        for t in range(self.n_triangles[None]):
+            tri = self.triangles[t]
+            self.box_lo[t] = ti.min(self.reach_lo[tri[0]], self.reach_lo[tri[1]], self.reach_lo[tri[2]])
+            self.box_hi[t] = ti.max(self.reach_hi[tri[0]], self.reach_hi[tri[1]], self.reach_hi[tri[2]])
         for i in range(self.n_particles[None]):
             n = self._collect(self.reach_lo[i] - tau, self.reach_hi[i] + tau, i, self.cand, self.full, i, i, False)
             self.n_cand[i] = n
@@ -628,7 +638,7 @@ class SelfCollision(ParticleCollider):
                         if self._near(t, lo, hi, ab[0], ab[1]):
                             for j in ti.static(range(3)):
                                 f = self.triangle_edges[t][j]
-                                if f > e:
+                                if f > e and self._edge_near(f, lo, hi):
                                     self._edge_edge_ccd(e, f, s, xi)
         return self.n_closing[None]
 
