@@ -27,13 +27,14 @@ starts intersection-free intersection-free:
   1. every gathered pair (point-triangle, edge-edge) is tested along the straight-line motion from the start of
      the step by additive CCD (collision.ccd): a pair closes if it would come closer than FLOOR thicknesses plus
      SEPARATION times the rest of its starting distance. A pair that was not gathered cannot touch while every
-     particle stays inside the box it was gathered with (its swept box padded by the thickness: the boxes of the
-     pair's two sides do not meet), so a particle that a push carried outside its box makes the stage gather
-     the candidates again, from the motion as it is then;
+     particle stays inside the reach it was gathered for (_gather: the boxes of the pair's two sides do not
+     meet), so a particle that a push carried outside its reach makes the stage gather the candidates again,
+     from the motion as it is then;
   2. a closing pair loses the approaching part of its relative motion along the normal between its closest points
      at the time of contact, as an inelastic impulse would remove it (Bridson, Fedkiw and Anderson 2002 section
-     7.2), pair after pair in one thread (the list is short); the motion along the contact plane is kept, so
-     layers still slide. The test and the response repeat (IMPULSE_PASSES at most);
+     7.2), pair after pair in one thread (the list is short, and sorted, so that a run repeats itself); the motion
+     along the contact plane is kept, so layers still slide. The test and the response repeat (IMPULSE_PASSES at
+     most);
   3. the particles of the pairs still closing are merged into impact zones (Provot 1997; Bridson, Fedkiw and
      Anderson 2002 section 7.4; Harmon et al. 2008), each zone the connected set of the pairs found so far in this
      step, and every zone moves as one rigid translation from the start of the step: the mass-weighted mean of its
@@ -190,11 +191,22 @@ class SelfCollision(ParticleCollider):
             for _ in range(IMPULSE_PASSES):
                 if n == 0:
                     return
+                self._sort_closing(n)
                 self._respond(n, 1.0 / dt)
                 self._gather_again_if_needed()
                 n = self._closing_pass()
             if n:
                 self._impact_zones(n, dt)
+
+    def _sort_closing(self, n: int) -> None:
+        """Put the n recorded closing pairs in a fixed order (the parallel test records them in any order, and the
+        one-thread response depends on it)."""
+        k = min(n, self.closing.shape[0])
+        ids = self.closing.to_numpy()[:k]
+        kind = self.closing_kind.to_numpy()[:k]
+        order = np.lexsort((ids[:, 3], ids[:, 2], ids[:, 1], ids[:, 0], kind))
+        fill_prefix(self.closing, ids[order])
+        fill_prefix(self.closing_kind, kind[order])
 
     def _impact_zones(self, n: int, dt: float) -> None:
         """Move the particles of the closing pairs (n found by the first pass) as rigid impact zones until no pair
@@ -270,8 +282,8 @@ class SelfCollision(ParticleCollider):
 
     @ti.func
     def _near(self, t, lo, hi, skip_a, skip_b):
-        """Triangle t's padded swept box meets box [lo, hi] and t has neither vertex skip_a nor skip_b (the grid's
-        cells also hold far triangles: hash collisions and cell corners)."""
+        """Triangle t's box (its vertices' reaches) meets box [lo, hi] and t has neither vertex skip_a nor skip_b
+        (the grid's cells also hold far triangles: hash collisions, cell corners, the grid's wider padding)."""
         tri = self.triangles[t]
         return (all(self.box_lo[t] <= hi) and all(lo <= self.box_hi[t]) and tri[0] != skip_a and tri[1] != skip_a
                 and tri[2] != skip_a and tri[0] != skip_b and tri[1] != skip_b and tri[2] != skip_b)
