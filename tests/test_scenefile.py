@@ -46,7 +46,8 @@ def test_self_collision_settings_from_a_table(tmp_path):
     sc = tc.load_scene(write(tmp_path, GOOD + "\n[self_collision]\nthickness = 0.004\ncontinuous = false\n")).scene
     obj = sc.controller("colliders").self_collision
     assert (obj.thickness, obj.continuous, obj.friction) == (0.004, False, 0.1)
-    with pytest.raises(tc.SceneError, match=r"\[self_collision\]: unknown key 'continous' \(did you mean 'continuous'\?\)"):
+    misspelled = r"\[self_collision\]: unknown key 'continous' \(did you mean 'continuous'\?\)"
+    with pytest.raises(tc.SceneError, match=misspelled):
         tc.load_scene(write(tmp_path, GOOD + "\n[self_collision]\ncontinous = false\n"))
 
 
