@@ -4,9 +4,8 @@ import numpy as np
 import pytest
 import taichi as ti
 
-import taichi_cloth as tc
+from benchmarks.self_collision_stress import crossings_per_frame, ribbon_pile, towel_folded_three_times
 from collision.ccd import additive_ccd, pair_distance
-from collision.intersections import count_intersecting_pairs
 
 
 @ti.kernel
@@ -66,61 +65,16 @@ def test_two_edges_passing_through_each_other_stop_apart():
 
 
 # ---------------------------------------------------------------------- stress scenes, counted at every frame
-FLOOR = [{"type": "plane", "point": [0, 0, 0], "normal": [0, 1, 0], "friction": 0.5}]
-
-
-def ribbon_pile(self_collision):
-    """A cotton ribbon 0.3 x 1.2 m (8 x 32 particles) with a gentle wave across it, dropped edge-down onto the
-    floor from 1 cm: it buckles and piles onto itself."""
-    cloth = tc.ClothBuilder.grid((0.3, 1.2), (8, 32), "cotton", center=(0.0, 0.61, 0.0), plane="xy")
-    cloth.positions[:, 2] += 0.03 * np.sin(2 * np.pi * cloth.positions[:, 1] / 0.4)
-    return tc.Scene(cloth, integrator="implicit", dt=1 / 60, self_collision=self_collision, colliders=FLOOR)
-
-
-def towel_folded_three_times(self_collision):
-    """A 1.2 x 0.9 m towel (20 x 15 particles) on the floor folded three times by pins: the +x third over the
-    middle (0-1 s), the -x third over it (1.2-2.2 s), then the +z third of the stack over to -z (2.4-3.4 s; its
-    pins lift the bottom layer's +z edge, and the flaps' pins hold only their -z two thirds, so no two pins
-    fight)."""
-    L, W = 1.2, 0.9
-    cloth = tc.ClothBuilder.grid((L, W), (20, 15), "cotton", center=(0.0, 0.003, 0.0), plane="xz")
-    x = cloth.positions
-
-    def fold(t0, axis, length, height=0.15, lift=0.03):
-        keys = [[0.0, 0.0, 0.0, 0.0]] if t0 > 0 else []
-        for s in np.linspace(0.0, 1.0, 13):
-            d = [0.0, height * np.sin(np.pi * s) + lift * s, 0.0]
-            d[axis] = length * (1 - np.cos(np.pi * s)) / 2
-            keys.append([t0 + s, *d])
-        return keys
-
-    held = x[:, 2] < W / 6
-    pins = [{"indices": np.nonzero((x[:, 0] > L / 2 - 1e-6) & held)[0].tolist(), "path": fold(0.0, 0, -(L / 2 - 0.01))},
-            {"indices": np.nonzero((x[:, 0] < -L / 2 + 1e-6) & held)[0].tolist(), "path": fold(1.2, 0, L / 2 - 0.01)},
-            {"indices": np.nonzero((x[:, 2] > W / 2 - 1e-6) & (np.abs(x[:, 0]) < L / 4 - 0.02))[0].tolist(),
-             "path": fold(2.4, 2, -(2 * W / 3), height=0.2, lift=0.06)}]
-    return tc.Scene(cloth, integrator="implicit", dt=1 / 60, air_damping=1.0, self_collision=self_collision,
-                    pins=pins, colliders=FLOOR)
-
-
-def crossings_per_frame(scene, frames, stop_at_first=False):
-    counts = []
-    for _ in range(frames):
-        scene.step(scene.substeps)
-        counts.append(count_intersecting_pairs(scene.positions(), scene.model.data.triangles))
-        if stop_at_first and counts[-1]:
-            break
-    return counts
-
-
 @pytest.mark.parametrize("build, frames", [(ribbon_pile, 90), (towel_folded_three_times, 240)],
                          ids=["ribbon pile", "towel folded three times"])
 def test_the_cloth_never_crosses_itself_at_any_frame(build, frames):
-    """Without self-collision the cloth passes through itself (the ribbon within 30 frames, the towel by its
-    second fold); with it, no two triangles intersect at any of the frames (1.5 s of the ribbon, 4 s of the towel),
-    and the continuous stage left no pair unresolved."""
-    without = crossings_per_frame(build(False), frames, stop_at_first=True)
-    assert without[-1] > 0
-    scene = build(True)
+    """The small stress scenes (benchmarks/self_collision_stress.py): without self-collision the cloth passes
+    through itself (the ribbon within 30 frames, the towel by its second fold); with it, no two triangles intersect
+    at any of the frames (1.5 s of the ribbon, 4 s of the towel), and the continuous stage left no pair
+    unresolved."""
+    without, _ = build(False, small=True)
+    assert crossings_per_frame(without, frames, stop_at_first=True)[-1] > 0
+    scene, n = build(True, small=True)
+    assert n == frames
     assert max(crossings_per_frame(scene, frames)) == 0
     assert scene.controller("colliders").self_collision.counter_values()["unresolved pairs"] == 0
