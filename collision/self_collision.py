@@ -20,20 +20,58 @@ The bodies resolve first: a particle they hold (a contact recorded this step) is
 a layer on a layer on the body moves away from the body, never into it.
 While the pieces of a garment are apart, a seam particle ignores the triangles and edges of the other seam
 particles, so that the seams can close.
+
+The passes keep the layers a thickness apart but guarantee nothing: a fast or crowded contact can still cross
+within a step. So the step ends with the continuous stage (`continuous`, on by default), which keeps a step that
+starts intersection-free intersection-free:
+  1. every gathered pair (point-triangle, edge-edge) is tested along the straight-line motion from the start of
+     the step by additive CCD (collision.ccd): a pair closes if it would come closer than FLOOR thicknesses plus
+     SEPARATION times the rest of its starting distance. A pair that was not gathered cannot touch while every
+     particle stays inside the reach it was gathered for (_gather: the boxes of the pair's two sides do not
+     meet), so a particle that a push carried outside its reach makes the stage gather the candidates again,
+     from the motion as it is then;
+  2. a closing pair loses the approaching part of its relative motion along the normal between its closest points
+     at the time of contact, as an inelastic impulse would remove it (Bridson, Fedkiw and Anderson 2002 section
+     7.2), pair after pair in one thread (the list is short, and sorted, so that a run repeats itself); the motion
+     along the contact plane is kept, so layers still slide. The test and the response repeat (IMPULSE_PASSES at
+     most);
+  3. the particles of the pairs still closing are merged into impact zones (Provot 1997; Bridson, Fedkiw and
+     Anderson 2002 section 7.4; Harmon et al. 2008), each zone the connected set of the pairs found so far in this
+     step, and every zone moves as one rigid translation from the start of the step: the mass-weighted mean of its
+     particles' motions and velocities (an inelastic collision: momentum is kept), or, where a pin is in the zone,
+     the pinned particles' mean motion (the pin carries the zone). A zone's own pairs then keep their starting
+     distances; the test repeats with the moved zones (ZONE_PASSES at most), merging zones that meet.
+A zone holding pins that move apart (a twist) cannot move rigidly with all of them; its pairs that still close
+after the last pass are counted as unresolved. Rotations are not kept (Bridson's zones keep angular momentum), and a
+zone stops the sliding inside it: the zones are a last resort. The stage does not untangle a cloth that starts
+crossed (the run reports that, taichi_cloth.self_intersection).
 """
 import numpy as np
 import taichi as ti
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 
 from clothbase.fields import FieldBlock, fill_prefix
 from clothbase.meshes import edges_of
 
 from .base import ParticleCollider
+from .ccd import additive_ccd
 from .geometry import barycentric, closest_point_on_triangle, closest_segment_params
 from .grid import VoxelGrid
 
 #: the point-triangle test reaches this fraction of the thickness beyond the triangle's outline (so that a particle
 #: right above a shared edge or vertex is caught by the triangles around it, whatever the round-off)
 OUTLINE_SLACK = 0.5
+#: the continuous stage keeps every pair at least FLOOR thicknesses plus SEPARATION times the rest of its distance
+#: at the start of the step apart (the floor keeps the gaps it tests far above round-off)
+SEPARATION, FLOOR = 0.1, 0.05
+#: passes that stop the approach of the closing pairs, then impact-zone passes, per step at most
+IMPULSE_PASSES, ZONE_PASSES = 16, 32
+#: the candidates gathered in a step serve the next steps while every particle stays within this many thicknesses
+#: of its motion in the step they were gathered (a calm cloth then skips the grid rebuild and the gathering)
+REUSE_MARGIN = 0.25
+#: additive CCD iterations per pair at most (a pair sliding past at its contact distance takes ~ l_p / 0.9 d)
+CCD_ITERATIONS = 256
 
 
 @ti.data_oriented
@@ -54,7 +92,8 @@ class SelfCollision(ParticleCollider):
     """
 
     def __init__(self, triangles, n_triangles, shapes, thickness: float | None = None, friction: float = 0.1,
-                 cell_size: float | None = None, max_candidates: int = 96, passes: int = 3, seam_particles=()):
+                 cell_size: float | None = None, max_candidates: int = 96, passes: int = 3, seam_particles=(),
+                 continuous: bool = True):
         shapes = [(np.asarray(x, dtype=np.float64), np.asarray(t, dtype=np.int64)) for x, t in shapes]
         if not shapes or any(len(t) == 0 for _, t in shapes):
             raise ValueError("self-collision needs a cloth with triangles")
@@ -63,7 +102,7 @@ class SelfCollision(ParticleCollider):
         if not friction >= 0:
             raise ValueError(f"self-collision friction must be >= 0, got {friction}")
         self.fixed_thickness = None if thickness is None else float(thickness)
-        self.friction, self.passes = float(friction), int(passes)
+        self.friction, self.passes, self.continuous = float(friction), int(passes), bool(continuous)
         self.max_candidates = int(max_candidates)
         self.triangles, self.n_triangles = triangles, n_triangles
         self.shapes = shapes
@@ -72,8 +111,10 @@ class SelfCollision(ParticleCollider):
         self.seam_particles = np.asarray(seam_particles, dtype=np.int64)
         self.edge_capacity = max(len(edges_of(t)[0]) for _, t in shapes)
         blk = FieldBlock()
-        # vertex-triangle candidates, edge candidates, point-triangle contacts, edge-edge contacts, overflows
-        self.counters = blk.scalar(ti.i64, 5)
+        # vertex-triangle candidates, edge candidates, point-triangle contacts, edge-edge contacts, overflows,
+        # the continuous stage's closing pairs (summed over its passes), impact zones (summed over the passes),
+        # pairs still closing after the last pass, particles found outside their boxes (gathered again)
+        self.counters = blk.scalar(ti.i64, 9)
         self.tau = blk.scalar(ti.f32, ())
         self.n_edges = blk.scalar(ti.i32, ())
         self.pass_contacts = blk.scalar(ti.i32, ())
@@ -91,20 +132,29 @@ class SelfCollision(ParticleCollider):
         self.n_cand = blk.scalar(ti.i32, P)
         self.edge_cand = blk.scalar(ti.i32, (E, K))  # edges near each edge (with a higher id)
         self.n_edge_cand = blk.scalar(ti.i32, E)
+        self.full = blk.scalar(ti.i8, P)  # 1 where a particle's candidates overflowed this step
+        self.edge_full = blk.scalar(ti.i8, E)
         self.edges = blk.vector(2, ti.i32, E)
         self.triangle_edges = blk.vector(3, ti.i32, T)
-        self.box_lo = blk.vector(3, ti.f32, T)  # the triangles' padded swept boxes [m] of this step
+        self.box_lo = blk.vector(3, ti.f32, T)  # the boxes of the triangles' vertices' reaches [m] (_gather)
         self.box_hi = blk.vector(3, ti.f32, T)
         self.on_seam = blk.scalar(ti.i8, P)
         self.dx = blk.vector(3, self.x.dtype, P)
         self.dv = blk.vector(3, self.x.dtype, P)
         self.hits = blk.scalar(ti.i32, P)
+        self.reach_lo = blk.vector(3, ti.f32, P)  # each particle's reach [m] while its candidates hold
+        self.reach_hi = blk.vector(3, ti.f32, P)
+        self.closing = blk.vector(4, ti.i32, 4 * P)  # the particles of the pairs that close this pass
+        self.closing_kind = blk.scalar(ti.i8, 4 * P)
+        self.n_closing = blk.scalar(ti.i32, ())
         blk.finalize(self)
+        self.stale = True
         self.topology_changed(*self.shapes[0])
         # sized by the shape with the most (triangle, cell) pairs; built on boxes swept from x_start to x
         x_np, t_np = max(self.shapes, key=lambda s: len(s[1]) * _mean_edge(*s) ** 2)
         self.grid = VoxelGrid(self.x, self.triangles, self.n_triangles, self.cell_size,
-                              pad=max(self._thickness_for(x, t) for x, t in self.shapes), margin=0.0,
+                              pad=(1 + REUSE_MARGIN) * max(self._thickness_for(x, t) for x, t in self.shapes),
+                              margin=0.0,
                               vertices_np=x_np, triangles_np=t_np, hashed=True, vertices_start=self.x_start,
                               serial=self.serial)
 
@@ -125,23 +175,96 @@ class SelfCollision(ParticleCollider):
         self.on_seam.from_numpy(flags)
         self.thickness = self._thickness_for(np.asarray(positions, dtype=np.float64), t)
         self.tau[None] = self.thickness
+        self.stale = True  # the candidates name the old triangles and edges
 
     def resolve(self, dt: float) -> None:
-        self.grid.build()
-        self._gather()
+        if self.stale or self._left_reach():
+            self.grid.build()
+            self._gather()
+            self.stale = False
         for _ in range(self.passes):
             if self._pass() == 0:  # nothing touched: the later passes would find nothing either
                 break
+        if self.continuous:
+            self._gather_again_if_needed()
+            n = self._closing_pass()
+            for _ in range(IMPULSE_PASSES):
+                if n == 0:
+                    return
+                self._sort_closing(n)
+                self._respond(n, 1.0 / dt)
+                self._gather_again_if_needed()
+                n = self._closing_pass()
+            if n:
+                self._impact_zones(n, dt)
+
+    def _sort_closing(self, n: int) -> None:
+        """Put the n recorded closing pairs in a fixed order (the parallel test records them in any order, and the
+        one-thread response depends on it)."""
+        k = min(n, self.closing.shape[0])
+        ids = self.closing.to_numpy()[:k]
+        kind = self.closing_kind.to_numpy()[:k]
+        order = np.lexsort((ids[:, 3], ids[:, 2], ids[:, 1], ids[:, 0], kind))
+        fill_prefix(self.closing, ids[order])
+        fill_prefix(self.closing_kind, kind[order])
+
+    def _impact_zones(self, n: int, dt: float) -> None:
+        """Move the particles of the closing pairs (n found by the first pass) as rigid impact zones until no pair
+        closes (module docstring, step 3). Runs on the host: zones are rare and small, and numpy's sums keep a
+        fixed order."""
+        P = int(self.n_particles[None])
+        x0 = self.x_start.to_numpy()[:P].astype(np.float64)
+        x = self.x.to_numpy()
+        v = self.v.to_numpy()
+        inv_mass = self.inv_mass.to_numpy()[:P].astype(np.float64)
+        motion, velocity = x[:P].astype(np.float64) - x0, v[:P].astype(np.float64)
+        pinned = inv_mass == 0
+        mass = np.where(pinned, 0.0, 1.0 / np.where(pinned, 1.0, inv_mass))
+        found = []
+        for _ in range(ZONE_PASSES):
+            ids = self.closing.to_numpy()[:min(n, self.closing.shape[0])].astype(np.int64)
+            self.counters[5] += n
+            found.append(ids)
+            pairs = np.concatenate(found)
+            graph = coo_matrix((np.ones(3 * len(pairs)), (np.repeat(pairs[:, 0], 3), pairs[:, 1:].ravel())),
+                               shape=(P, P))
+            members = np.unique(pairs)
+            _, zone = connected_components(graph, directed=False)
+            z = zone[members]
+            count = np.bincount(z, minlength=P)
+            held = np.bincount(z, weights=pinned[members], minlength=P)
+            m = np.bincount(z, weights=mass[members], minlength=P)
+            shift = np.empty((P, 3))
+            drift = np.empty((P, 3))
+            for c in range(3):
+                pin_mean = np.bincount(z, weights=np.where(pinned[members], motion[members, c], 0.0), minlength=P)
+                free_mean = np.bincount(z, weights=mass[members] * motion[members, c], minlength=P)
+                free_vel = np.bincount(z, weights=mass[members] * velocity[members, c], minlength=P)
+                with np.errstate(invalid="ignore", divide="ignore"):
+                    shift[:, c] = np.where(held > 0, pin_mean / held, free_mean / m)
+                    drift[:, c] = np.where(held > 0, shift[:, c] / dt, free_vel / m)
+            free = members[~pinned[members]]
+            x[free] = x0[free] + shift[zone[free]]
+            v[free] = drift[zone[free]]
+            self.x.from_numpy(x)
+            self.v.from_numpy(v)
+            self.counters[6] += int(np.count_nonzero(count > 1))
+            self._gather_again_if_needed()
+            n = self._closing_pass()
+            if n == 0:
+                return
+        self.counters[7] += n
 
     def counter_values(self) -> dict:
         names = ("candidates", "edge candidates", "point-triangle contacts", "edge-edge contacts",
-                 "candidate_overflows")
+                 "candidate_overflows", "closing pairs", "impact zones", "unresolved pairs", "gathered again")
         return dict(zip(names, (int(c) for c in self.counters.to_numpy())))
 
     # ------------------------------------------------------------------ candidates
     @ti.func
-    def _add(self, cand: ti.template(), row, n, item):
-        """Append `item` to cand[row, :n] unless it is there; returns the new count (overflows are counted)."""
+    def _add(self, cand: ti.template(), full: ti.template(), row, n, item):
+        """Append `item` to cand[row, :n] unless it is there; returns the new count (an overflow is counted and
+        marks the row full: the continuous stage then walks the grid for it)."""
         seen = False
         for k in range(n):
             if cand[row, k] == item:
@@ -153,51 +276,74 @@ class SelfCollision(ParticleCollider):
                 cand[row, n] = item
                 out = n + 1
             else:
+                full[row] = ti.cast(1, ti.i8)
                 ti.atomic_add(self.counters[4], 1)
         return out
 
     @ti.func
-    def _collect(self, lo, hi, row, cand: ti.template(), skip_a, skip_b, edges: ti.template()):
+    def _near(self, t, lo, hi, skip_a, skip_b):
+        """Triangle t's box (its vertices' reaches) meets box [lo, hi] and t has neither vertex skip_a nor skip_b
+        (the grid's cells also hold far triangles: hash collisions, cell corners, the grid's wider padding)."""
+        tri = self.triangles[t]
+        return (all(self.box_lo[t] <= hi) and all(lo <= self.box_hi[t]) and tri[0] != skip_a and tri[1] != skip_a
+                and tri[2] != skip_a and tri[0] != skip_b and tri[1] != skip_b and tri[2] != skip_b)
+
+    @ti.func
+    def _edge_near(self, f, lo, hi):
+        """Edge f's reach box (its ends' reaches) meets box [lo, hi]."""
+        q = self.edges[f]
+        return (all(ti.min(self.reach_lo[q[0]], self.reach_lo[q[1]]) <= hi)
+                and all(lo <= ti.max(self.reach_hi[q[0]], self.reach_hi[q[1]])))
+
+    @ti.func
+    def _collect(self, lo, hi, row, cand: ti.template(), full: ti.template(), skip_a, skip_b, edges: ti.template()):
         """Gather into cand[row, :] the triangles whose padded swept boxes meet box [lo, hi] and have neither vertex
         skip_a nor skip_b, or with `edges`, the edges above `row` of those triangles; returns how many."""
         cmin, cmax = self.grid.clamp_range(lo, hi)
         n = 0
+        full[row] = ti.cast(0, ti.i8)
         for a, b, c in ti.ndrange((cmin[0], cmax[0] + 1), (cmin[1], cmax[1] + 1), (cmin[2], cmax[2] + 1)):
             cell = self.grid.cell_index(ti.Vector([a, b, c]))
             for e in range(self.grid.cell_start[cell], self.grid.cell_start[cell + 1]):
                 t = self.grid.cell_triangles[e]
-                tri = self.triangles[t]
-                # hash collisions and cell corners bring far ones
-                if (all(self.box_lo[t] <= hi) and all(lo <= self.box_hi[t]) and tri[0] != skip_a
-                        and tri[1] != skip_a and tri[2] != skip_a and tri[0] != skip_b and tri[1] != skip_b
-                        and tri[2] != skip_b):
+                if self._near(t, lo, hi, skip_a, skip_b):
                     if ti.static(edges):
                         for j in ti.static(range(3)):
                             f = self.triangle_edges[t][j]
-                            if f > row:  # each pair once
-                                n = self._add(cand, row, n, f)
+                            if f > row and self._edge_near(f, lo, hi):  # each pair once
+                                n = self._add(cand, full, row, n, f)
                     else:
-                        n = self._add(cand, row, n, t)
+                        n = self._add(cand, full, row, n, t)
         return n
 
     @ti.kernel
     def _gather(self):
+        """Gather the candidates (the grid is built): each particle's reach is its motion over the step (start to
+        now) grown by REUSE_MARGIN thicknesses, a triangle's box the box of its vertices' reaches; a particle gathers
+        the triangles whose boxes meet its reach padded by the thickness, an edge the edges whose reach boxes meet
+        its own so padded (found through the grid, whose cells hold the triangles' swept boxes padded by (1 +
+        REUSE_MARGIN) thicknesses: the triangles' boxes and more). While every particle stays in its reach, every
+        pair within a thickness of each other is among the candidates."""
         # in parallel even on a small cloth: a few milliseconds of work, against a dispatch of ~0.1 ms
         tau = ti.cast(self.tau[None], ti.f32)
-        for t in range(self.n_triangles[None]):
-            self.box_lo[t], self.box_hi[t] = self.grid.triangle_box(t)
+        margin = ti.cast(REUSE_MARGIN, ti.f32) * tau
         for i in range(self.n_particles[None]):
             p0, p1 = ti.cast(self.x_start[i], ti.f32), ti.cast(self.x[i], ti.f32)
-            n = self._collect(ti.min(p0, p1) - tau, ti.max(p0, p1) + tau, i, self.cand, i, i, False)
+            self.reach_lo[i], self.reach_hi[i] = ti.min(p0, p1) - margin, ti.max(p0, p1) + margin
+        for t in range(self.n_triangles[None]):
+            tri = self.triangles[t]
+            self.box_lo[t] = ti.min(self.reach_lo[tri[0]], self.reach_lo[tri[1]], self.reach_lo[tri[2]])
+            self.box_hi[t] = ti.max(self.reach_hi[tri[0]], self.reach_hi[tri[1]], self.reach_hi[tri[2]])
+        for i in range(self.n_particles[None]):
+            n = self._collect(self.reach_lo[i] - tau, self.reach_hi[i] + tau, i, self.cand, self.full, i, i, False)
             self.n_cand[i] = n
             ti.atomic_add(self.counters[0], n)
         for e in range(self.n_edges[None]):
             # edges within one ring of the edge's ends are its neighbours, not its contacts
             ab = self.edges[e]
-            lo = ti.min(self.x_start[ab[0]], self.x_start[ab[1]], self.x[ab[0]], self.x[ab[1]])
-            hi = ti.max(self.x_start[ab[0]], self.x_start[ab[1]], self.x[ab[0]], self.x[ab[1]])
-            n = self._collect(ti.cast(lo, ti.f32) - tau, ti.cast(hi, ti.f32) + tau, e, self.edge_cand, ab[0], ab[1],
-                              True)
+            lo = ti.min(self.reach_lo[ab[0]], self.reach_lo[ab[1]])
+            hi = ti.max(self.reach_hi[ab[0]], self.reach_hi[ab[1]])
+            n = self._collect(lo - tau, hi + tau, e, self.edge_cand, self.edge_full, ab[0], ab[1], True)
             self.n_edge_cand[e] = n
             ti.atomic_add(self.counters[1], n)
 
@@ -247,8 +393,28 @@ class SelfCollision(ParticleCollider):
         return a != 0 and b != 0
 
     @ti.func
+    def _swept_apart(self, ids, edge_edge: ti.template(), gap):
+        """Whether the boxes the two sides of pair ids (4,) (point | triangle, or edge | edge) sweep over the step
+        are more than `gap` [m] apart along an axis: then the pair never comes within `gap` (a cheap test that
+        spares most candidates the exact one)."""
+        x0, x1 = ti.static(self.x_start, self.x)
+        lo_a, hi_a = ti.min(x0[ids[0]], x1[ids[0]]), ti.max(x0[ids[0]], x1[ids[0]])
+        lo_b, hi_b = ti.min(x0[ids[3]], x1[ids[3]]), ti.max(x0[ids[3]], x1[ids[3]])
+        for k in ti.static(range(1, 3)):
+            if ti.static(edge_edge and k == 1):
+                lo_a, hi_a = ti.min(lo_a, x0[ids[k]], x1[ids[k]]), ti.max(hi_a, x0[ids[k]], x1[ids[k]])
+            else:
+                lo_b, hi_b = ti.min(lo_b, x0[ids[k]], x1[ids[k]]), ti.max(hi_b, x0[ids[k]], x1[ids[k]])
+        return any(lo_a - hi_b > gap) or any(lo_b - hi_a > gap)
+
+    @ti.func
     def _point_triangle(self, i, t, tau, friction):
         tri = self.triangles[t]
+        if not self._swept_apart(ti.Vector([i, tri[0], tri[1], tri[2]]), False, tau):
+            self._point_triangle_near(i, tri, tau, friction)
+
+    @ti.func
+    def _point_triangle_near(self, i, tri, tau, friction):
         p0, p1 = self.x_start[i], self.x[i]
         a0, b0, c0 = self.x_start[tri[0]], self.x_start[tri[1]], self.x_start[tri[2]]
         a1, b1, c1 = self.x[tri[0]], self.x[tri[1]], self.x[tri[2]]
@@ -277,6 +443,11 @@ class SelfCollision(ParticleCollider):
     def _edge_edge(self, e, f, tau, friction):
         pa, pb = self.edges[e]
         qa, qb = self.edges[f]
+        if not self._swept_apart(ti.Vector([pa, pb, qa, qb]), True, tau):
+            self._edge_edge_near(pa, pb, qa, qb, tau, friction)
+
+    @ti.func
+    def _edge_edge_near(self, pa, pb, qa, qb, tau, friction):
         s, u = closest_segment_params(self.x[pa], self.x[pb], self.x[qa], self.x[qb])
         inner = 1e-3
         if s > inner and s < 1 - inner and u > inner and u < 1 - inner:
@@ -329,6 +500,159 @@ class SelfCollision(ParticleCollider):
                 self.x[i] += self.dx[i] / self.hits[i]
                 self.v[i] += self.dv[i] / self.hits[i]
         return self.pass_contacts[None]
+
+    # ------------------------------------------------------------------ the continuous stage
+    @ti.kernel
+    def _left_reach(self) -> ti.i32:
+        """How many particles lie outside the reach they gathered their candidates for (_gather): while none does,
+        a pair that was not gathered cannot touch, since the boxes of its two sides do not meet."""
+        out = 0
+        ti.loop_config(serialize=self.serial)
+        for i in range(self.n_particles[None]):
+            p, q = ti.cast(self.x_start[i], ti.f32), ti.cast(self.x[i], ti.f32)
+            lo, hi = self.reach_lo[i], self.reach_hi[i]
+            if any(ti.min(p, q) < lo) or any(ti.max(p, q) > hi):
+                out += 1
+        return out
+
+    def _gather_again_if_needed(self) -> None:
+        """Gather the candidates again, from the motion as it is now, if a response carried a particle outside its
+        reach (rare: a push is shorter than the reach's margin)."""
+        left = self._left_reach()
+        if left:
+            self.counters[8] += left
+            self.grid.build()
+            self._gather()
+
+    @ti.func
+    def _closes(self, ids, kind):
+        """Record the pair of particles ids (4,) as closing (kind 0: point-triangle, 1: edge-edge)."""
+        k = ti.atomic_add(self.n_closing[None], 1)
+        if k < self.closing.shape[0]:
+            self.closing[k] = ids
+            self.closing_kind[k] = ti.cast(kind, ti.i8)
+
+    @ti.func
+    def _pair_toi(self, ids, edge_edge: ti.template(), s, xi):
+        """The fraction of the step pair ids (4,) (point, triangle or edge, edge) can safely take (collision.ccd):
+        1 at once where the boxes its two sides sweep never meet (they cannot touch)."""
+        x0, x1 = ti.static(self.x_start, self.x)
+        out = x0[ids[0]][0] * 0.0 + 1.0
+        if not self._swept_apart(ids, edge_edge, 0.0):
+            a, b, c, d = ids[0], ids[1], ids[2], ids[3]
+            out = additive_ccd(x0[a], x0[b], x0[c], x0[d], x1[a] - x0[a], x1[b] - x0[b], x1[c] - x0[c],
+                               x1[d] - x0[d], s, xi, CCD_ITERATIONS, edge_edge)
+        return out
+
+    @ti.func
+    def _stop_approach(self, ids, edge_edge: ti.template(), toi, rate):
+        """The inelastic response of a pair that closes at fraction toi of the step (Bridson, Fedkiw and Anderson
+        2002 section 7.2): its particles ids (4,) lose the approaching part of their relative motion along the
+        normal between the pair's closest points at toi, by mass and barycentric weight, and their velocities the
+        matching change (rate = 1/dt [1/s]); the motion along the contact plane is kept, so layers still slide."""
+        x0, x1 = ti.static(self.x_start, self.x)
+        p = [x0[ids[k]] + toi * (x1[ids[k]] - x0[ids[k]]) for k in ti.static(range(4))]
+        w = ti.Vector.zero(self.x.dtype, 4)
+        n = p[0] - p[0]
+        if ti.static(edge_edge):
+            u, v = closest_segment_params(p[0], p[1], p[2], p[3])
+            n = ((p[0] + u * (p[1] - p[0])) - (p[2] + v * (p[3] - p[2]))).normalized(1e-20)
+            w = ti.Vector([1.0 - u, u, v - 1.0, -v], self.x.dtype)
+        else:
+            q = closest_point_on_triangle(p[0], p[1], p[2], p[3])
+            bary = barycentric(q, p[1], p[2], p[3])
+            n = (p[0] - q).normalized(1e-20)
+            w = ti.Vector([1.0, -bary[0], -bary[1], -bary[2]], self.x.dtype)
+        im = ti.Vector([self._mobility(ids[k], w[k] * n) for k in ti.static(range(4))], self.x.dtype)
+        approach = n.dot(n) * 0.0
+        for k in ti.static(range(4)):
+            approach += w[k] * (x1[ids[k]] - x0[ids[k]]).dot(n)
+        den = (w * w * im).sum()
+        if approach < 0 and den > 0:
+            lam = -approach / den
+            for k in ti.static(range(4)):
+                x1[ids[k]] += w[k] * im[k] * lam * n
+                self.v[ids[k]] += w[k] * im[k] * lam * rate * n
+
+    @ti.func
+    def _point_triangle_ccd(self, i, t, s, xi):
+        tri = self.triangles[t]
+        seams = self.on_seam[tri[0]] + self.on_seam[tri[1]] + self.on_seam[tri[2]]
+        if not self._seams_meet(self.on_seam[i], seams):
+            ids = ti.Vector([i, tri[0], tri[1], tri[2]])
+            if self._pair_toi(ids, False, s, xi) < 1:
+                self._closes(ids, 0)
+
+    @ti.func
+    def _edge_edge_ccd(self, e, f, s, xi):
+        pa, pb = self.edges[e]
+        qa, qb = self.edges[f]
+        if not self._seams_meet(self.on_seam[pa] + self.on_seam[pb], self.on_seam[qa] + self.on_seam[qb]):
+            ids = ti.Vector([pa, pb, qa, qb])
+            if self._pair_toi(ids, True, s, xi) < 1:
+                self._closes(ids, 1)
+
+    @ti.kernel
+    def _respond(self, n: ti.i32, inv_dt: ti.f64):
+        """Stop the approach of the n recorded closing pairs one after the other (Gauss-Seidel: each sees the
+        corrections before it, so a stack of layers settles in a few passes; the list is short, one thread)."""
+        s = ti.cast(SEPARATION, self.x.dtype)
+        xi = ti.cast(FLOOR * self.tau[None], self.x.dtype)
+        rate = ti.cast(inv_dt, self.x.dtype)
+        ti.loop_config(serialize=True)
+        for k in range(ti.min(n, self.closing.shape[0])):
+            ids = self.closing[k]
+            if self.closing_kind[k] == 0:
+                toi = self._pair_toi(ids, False, s, xi)
+                if toi < 1:
+                    self._stop_approach(ids, False, toi, rate)
+            else:
+                toi = self._pair_toi(ids, True, s, xi)
+                if toi < 1:
+                    self._stop_approach(ids, True, toi, rate)
+
+    @ti.kernel
+    def _closing_pass(self) -> ti.i32:
+        """Test every gathered pair along the step's straight-line motion and record the pairs that close; returns
+        how many. A row whose candidates overflowed walks the grid instead of its list, so no pair is missed."""
+        s = ti.cast(SEPARATION, self.x.dtype)
+        xi = ti.cast(FLOOR * self.tau[None], self.x.dtype)
+        tau = ti.cast(self.tau[None], ti.f32)
+        self.n_closing[None] = 0
+        ti.loop_config(serialize=self.serial)
+        for i in range(self.n_particles[None]):
+            if self.full[i] == 0:
+                for k in range(self.n_cand[i]):
+                    self._point_triangle_ccd(i, self.cand[i, k], s, xi)
+            else:
+                lo, hi = self.reach_lo[i] - tau, self.reach_hi[i] + tau
+                cmin, cmax = self.grid.clamp_range(lo, hi)
+                for a, b, c in ti.ndrange((cmin[0], cmax[0] + 1), (cmin[1], cmax[1] + 1), (cmin[2], cmax[2] + 1)):
+                    cell = self.grid.cell_index(ti.Vector([a, b, c]))
+                    for m in range(self.grid.cell_start[cell], self.grid.cell_start[cell + 1]):
+                        t = self.grid.cell_triangles[m]
+                        if self._near(t, lo, hi, i, i):  # a triangle in several cells is tested again: harmless
+                            self._point_triangle_ccd(i, t, s, xi)
+        ti.loop_config(serialize=self.serial)
+        for e in range(self.n_edges[None]):
+            if self.edge_full[e] == 0:
+                for k in range(self.n_edge_cand[e]):
+                    self._edge_edge_ccd(e, self.edge_cand[e, k], s, xi)
+            else:
+                ab = self.edges[e]
+                lo = ti.min(self.reach_lo[ab[0]], self.reach_lo[ab[1]]) - tau
+                hi = ti.max(self.reach_hi[ab[0]], self.reach_hi[ab[1]]) + tau
+                cmin, cmax = self.grid.clamp_range(lo, hi)
+                for a, b, c in ti.ndrange((cmin[0], cmax[0] + 1), (cmin[1], cmax[1] + 1), (cmin[2], cmax[2] + 1)):
+                    cell = self.grid.cell_index(ti.Vector([a, b, c]))
+                    for m in range(self.grid.cell_start[cell], self.grid.cell_start[cell + 1]):
+                        t = self.grid.cell_triangles[m]
+                        if self._near(t, lo, hi, ab[0], ab[1]):
+                            for j in ti.static(range(3)):
+                                f = self.triangle_edges[t][j]
+                                if f > e and self._edge_near(f, lo, hi):
+                                    self._edge_edge_ccd(e, f, s, xi)
+        return self.n_closing[None]
 
     def describe(self) -> dict:
         return {"kind": "self"}

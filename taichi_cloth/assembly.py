@@ -90,8 +90,8 @@ def assemble(cloth, *, name: str = "cloth", integrator: str = DEFAULT_INTEGRATOR
     stretch_limit:      None or StretchLimit keyword arguments (max_strain, iterations, tolerance, omega)
     colliders:          collider specs (dicts, see taichi_cloth.colliders) or collision objects; resolved after
                         every step, in order
-    self_collision:     False, True, or SelfCollision keyword arguments (thickness, friction): the cloth against its
-                        own triangles, resolved before the colliders
+    self_collision:     False, True, or SelfCollision keyword arguments (thickness, friction, continuous): the cloth
+                        against its own triangles, resolved after the colliders
     multilevel:         for a MultilevelCloth or a MultilevelGarment: SettleCriterion keyword arguments (max_speed,
                         energy_change, window, max_time), refine ("global" = True, "local", or "none" = False),
                         angle (local refinement: the dihedral angle [deg] that calls for it, default 20) and dt_growth

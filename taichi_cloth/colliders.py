@@ -121,6 +121,11 @@ class Colliders(Controller):
         return out
 
     @property
+    def self_collision(self) -> SelfCollision | None:
+        """The cloth's self-collision, if the scene has it."""
+        return next((c for c in self.objects if isinstance(c, SelfCollision)), None)
+
+    @property
     def bodies(self) -> list:
         """The mesh colliders (bodies)."""
         return [c for c in self.objects if isinstance(c, MeshCollider)]

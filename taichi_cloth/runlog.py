@@ -26,13 +26,24 @@ class FrameLog:
         self.bar = tqdm(total=frames, unit="frame", desc=progress, leave=False) if progress is not None else None
 
     def begin(self, scene, translation) -> None:
+        crossed = None
+        if self.intersections is not None:
+            crossed = self.intersections.count(scene.positions(), scene.model.data.triangles, scene.state.t)
+            colliders = scene.controller("colliders")
+            if crossed and colliders is not None and colliders.self_collision is not None:
+                scene.warn(f"the cloth starts with {crossed} intersecting triangle pairs: self-collision keeps "
+                           "every layer on the side it starts on and cannot pull these apart (place the pieces "
+                           "apart before the run)")
         events = scene.collect_notes(self.summary)
         if self.recorder is not None:  # not in wall_record: like frame 1's steps, the start compiles (the normals)
             layout = scene_layout(scene)
             if self.intersections is not None:
                 layout.series["intersections"] = "intersecting triangle pairs"
             self.recorder.begin_cloth(self.entity, layout, translation)
-            self.recorder.log_frame(self.entity, scene_snapshot(scene, 0, scene.measure(), events=events))
+            snap = scene_snapshot(scene, 0, scene.measure(), events=events)
+            if crossed is not None:
+                snap.scalars["intersections"] = crossed
+            self.recorder.log_frame(self.entity, snap)
 
     def frame(self, scene, frame: int, m: Measurement, steps_per_s: float | None, new_topology: bool,
               last: bool = False) -> None:

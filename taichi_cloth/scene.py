@@ -187,8 +187,12 @@ class Scene:
         if change.event:
             self._notes.append(("INFO", change.event))
         if change.warning:
-            self.warnings.append(change.warning)
-            self._notes.append(("WARN", change.warning))
+            self.warn(change.warning)
+
+    def warn(self, message: str) -> None:
+        """A warning for the run summary and the recording's events."""
+        self.warnings.append(message)
+        self._notes.append(("WARN", message))
 
     def reset(self) -> None:
         """Back to t = 0: rest positions, zero velocity, integrator history cleared, every controller at its start

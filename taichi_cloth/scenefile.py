@@ -117,7 +117,9 @@ SCHEMA = Table({
     "precision": Field("str", "f32", choices=("f32", "f64")),
     "gravity": Field("vec3", [0.0, -9.81, 0.0]),
     "air_damping": Field("number", 0.1, nonneg),
-    "self_collision": Field("bool", False),
+    # true, or a table of SelfCollision options
+    "self_collision": Table({"thickness": Field("number", None, positive), "friction": Field("number", None, nonneg),
+                             "continuous": Field("bool", None)}, allow_string=Field("bool")),
     "quality": Field("str", None, choices=QUALITIES),
     "cloth": Table({
         "material": MATERIAL_TABLE,
@@ -336,7 +338,8 @@ def build_scene(cfg: dict) -> Scene:
                      adaptive=adaptive if dt == "auto" else None,
                      gravity=cfg["gravity"], air_damping=cfg["air_damping"], pins=pins, wind=cfg.get("wind"),
                      stretch_limit=cfg.get("stretch_limit"), colliders=colliders, body_morph=body_morph,
-                     self_collision=cfg["self_collision"], fps=cfg["fps"], multilevel=_schedule(cfg.get("multilevel")),
+                     self_collision=_self_collision(cfg.get("self_collision")), fps=cfg["fps"],
+                     multilevel=_schedule(cfg.get("multilevel")),
                      sewing=_sewing(cfg.get("sewing"), cloth_cfg), precision=cfg["precision"], step_guard=guard,
                      rest=cfg.get("rest"), base_dir=cfg["_base_dir"])
     except SceneError as exc:
@@ -369,6 +372,16 @@ def _sewing(sewing: dict | None, cloth_cfg: dict) -> dict | None:
     if sewing is None:
         return {} if cloth_cfg.get("garment") is not None else None
     return {k: v for k, v in sewing.items() if k != "stiffness" and v is not None}
+
+
+def _self_collision(cfg: dict | None):
+    """The scene's self_collision: False when absent, the bool of `self_collision = true | false`, or the table's
+    SelfCollision options (a table turns it on)."""
+    if cfg is None:
+        return False
+    if "preset" in cfg:
+        return cfg["preset"]
+    return {k: v for k, v in cfg.items() if v is not None} or True
 
 
 def _schedule(ml: dict | None) -> dict | None:

@@ -4,8 +4,8 @@ and at its end, for the run summary and the recording (part of a run's bookkeepi
 A drape can look right and still have a sleeve through the body of the shirt or a fold through itself; the count
 says so at a glance. The count is collision.intersections' (exact, triangles sharing no vertex, on the host), which
 is independent of the self-collision code. It costs too much for every frame (docs/collision.md, self-collision),
-so a run counts every `every` frames (a quarter of a simulated second by default) and once more at its end. The
-largest count is the largest of those: a crossing that opens and closes again between two counts is not seen.
+so a run counts at its start, every `every` frames (a quarter of a simulated second by default) and once more at its
+end. The largest count is the largest of those: a crossing that opens and closes again between two counts is not seen.
 """
 from __future__ import annotations
 
@@ -21,6 +21,7 @@ class IntersectionCount:
     """The counts of one run at `fps` frames per simulated second, every `every` frames (default: INTERVAL).
 
     now:      the last count (None before the first)
+    at_start: the first count (the run's start; None before it)
     largest:  the largest count so far, and t_largest [s] when it was seen
     counted:  how many counts were made
     """
@@ -31,6 +32,7 @@ class IntersectionCount:
             raise ValueError(f"every must be >= 1 frame, got {every}")
         self.every, self.fps = every, float(fps)
         self.now: int | None = None
+        self.at_start: int | None = None
         self.largest, self.t_largest, self.counted = 0, 0.0, 0
 
     def due(self, frame: int) -> bool:
@@ -42,6 +44,8 @@ class IntersectionCount:
         keep the largest."""
         n = count_intersecting_pairs(positions, triangles)
         self.now, self.counted = n, self.counted + 1
+        if self.at_start is None:
+            self.at_start = n
         if self.counted == 1 or n > self.largest:
             self.largest, self.t_largest = n, t
         return n
@@ -49,4 +53,5 @@ class IntersectionCount:
     def describe(self) -> str:
         """The run summary's line, after a final count."""
         return (f"self-intersection: {self.now} intersecting triangle pairs now, at most {self.largest} "
-                f"(t = {self.t_largest:.3f} s; counted every {self.every / self.fps:.3g} s and at the end)")
+                f"(t = {self.t_largest:.3f} s), {self.at_start} at the start; counted every "
+                f"{self.every / self.fps:.3g} s and at the end")

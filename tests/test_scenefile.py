@@ -41,6 +41,16 @@ def test_good_file_builds_what_it_names(tmp_path):
     assert sc.forces.sources == () and sc.contacts is None
 
 
+def test_self_collision_settings_from_a_table(tmp_path):
+    """`[self_collision]` turns it on with its settings; a misspelled key is named with the right one."""
+    sc = tc.load_scene(write(tmp_path, GOOD + "\n[self_collision]\nthickness = 0.004\ncontinuous = false\n")).scene
+    obj = sc.controller("colliders").self_collision
+    assert (obj.thickness, obj.continuous, obj.friction) == (0.004, False, 0.1)
+    misspelled = r"\[self_collision\]: unknown key 'continous' \(did you mean 'continuous'\?\)"
+    with pytest.raises(tc.SceneError, match=misspelled):
+        tc.load_scene(write(tmp_path, GOOD + "\n[self_collision]\ncontinous = false\n"))
+
+
 def test_colliders_from_a_file(tmp_path):
     text = GOOD + """
 self_collision = true

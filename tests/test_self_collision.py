@@ -162,11 +162,8 @@ class _Snapshots:
         """Nothing is written."""
 
 
-def test_the_run_summary_and_the_recording_count_the_intersecting_pairs():
-    """A sheet folded through itself, its rest shape that folded shape, no gravity: it stays put, so every count of
-    the run, in the recording every quarter second (15 frames at 60 fps) and in the summary at the end, is the exact
-    count of its pose (35 pairs; the folded half is shifted off the grid below it, so that no edge grazes a triangle
-    and the count is the same at any jitter under 1e-5 m)."""
+def folded_sheet():
+    """A 10 x 10 sheet folded through itself, its rest shape that folded shape: 35 intersecting pairs."""
     sheet = tc.ClothBuilder.grid((1.0, 1.0), (10, 10))
     x = sheet.positions.copy()
     right = x[:, 0] > 0.1
@@ -175,17 +172,38 @@ def test_the_run_summary_and_the_recording_count_the_intersecting_pairs():
     x[right, 2] = 0.05 - 0.2 * (x[right, 0] + 0.4)
     a, b = sheet.springs[:, 0], sheet.springs[:, 1]
     sheet.positions, sheet.rest_length = x, np.linalg.norm(x[b] - x[a], axis=1)
+    return sheet
+
+
+def test_the_run_summary_and_the_recording_count_the_intersecting_pairs():
+    """A sheet folded through itself, its rest shape that folded shape, no gravity: it stays put, so every count of
+    the run, in the recording every quarter second (15 frames at 60 fps) and in the summary at the end, is the exact
+    count of its pose (35 pairs; the folded half is shifted off the grid below it, so that no edge grazes a triangle
+    and the count is the same at any jitter under 1e-5 m)."""
+    sheet = folded_sheet()
+    x = sheet.positions
     crossing = count_intersecting_pairs(x, sheet.triangles)
     assert crossing == 35
     sc = tc.Scene(sheet, integrator="explicit", dt=1 / 2400, gravity=(0.0, 0.0, 0.0), fps=60)
     rec = _Snapshots()
     summary = sc.run(30, recorder=rec, progress=False)
     assert summary.intersections == summary.intersections_max == crossing
-    assert (f"self-intersection: {crossing} intersecting triangle pairs now, at most {crossing} (t = 0.250 s; "
-            "counted every 0.25 s and at the end)") in summary.format()
+    assert (f"self-intersection: {crossing} intersecting triangle pairs now, at most {crossing} (t = 0.000 s), "
+            f"{crossing} at the start; counted every 0.25 s and at the end") in summary.format()
     assert "intersections" in rec.layout.series
     assert {s.frame: s.scalars["intersections"] for s in rec.snaps if "intersections" in s.scalars} == \
-        {15: crossing, 30: crossing}
+        {0: crossing, 15: crossing, 30: crossing}
+    assert not any("starts with" in w for w in summary.warnings)  # no self-collision: nothing to warn about
+
+
+def test_a_run_with_self_collision_that_starts_crossed_says_so():
+    """The same folded sheet with self-collision: the run warns that it starts with 35 intersecting pairs that
+    self-collision cannot pull apart."""
+    sheet = folded_sheet()
+    sc = tc.Scene(sheet, integrator="implicit", dt=1 / 60, gravity=(0.0, 0.0, 0.0), self_collision=True)
+    summary = sc.run(2, progress=False)
+    assert ("the cloth starts with 35 intersecting triangle pairs: self-collision keeps every layer on the side it "
+            "starts on and cannot pull these apart (place the pieces apart before the run)") in summary.warnings
 
 
 def test_the_largest_count_is_kept_with_its_time():
