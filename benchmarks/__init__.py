@@ -13,5 +13,17 @@ Suites of `python -m taichi_cloth bench SUITE` (each with add_arguments(parser) 
 accuracy: sampled runs and their distance to a reference, shared by tradeoff and peers.
 
 Standalone scripts (`.venv/bin/python benchmarks/NAME.py`): approx_implicit_variants,
-multilevel_garment, multilevel_pays, self_collision.
+multilevel_garment, multilevel_pays, self_collision, self_collision_stress.
 """
+
+
+def write_csv(rows: list[dict], path, keys: list[str] | None = None) -> None:
+    """Write `rows` (dicts) to the CSV file `path`: the columns `keys` (other keys are left out), or one per key in
+    the order the keys first appear."""
+    import csv
+
+    keys = list(dict.fromkeys(k for r in rows for k in r)) if keys is None else keys
+    with open(path, "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=keys, extrasaction="ignore")
+        w.writeheader()
+        w.writerows(rows)

@@ -13,13 +13,13 @@ ratio candidates / fuzzy tests, and the integrator's ms per step on the same sce
 """
 from __future__ import annotations
 
-import csv
 import statistics
 import time
 from pathlib import Path
 
 import taichi as ti
 
+from benchmarks import write_csv
 from collision import MeshCollider
 from taichi_cloth import runtime
 from taichi_cloth.builder import ClothBuilder
@@ -138,10 +138,7 @@ def _write(rows, out: Path) -> None:
     lines += [f"| {_fmt(r)} |" for r in rows]
     text = "\n".join(lines)
     (out / "collision.md").write_text(text + "\n")
-    with open(out / "collision.csv", "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
+    write_csv(rows, out / "collision.csv")
     print("\n" + text)
     import matplotlib
 

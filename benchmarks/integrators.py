@@ -22,6 +22,7 @@ from pathlib import Path
 import taichi as ti
 from taichi.lang import impl
 
+from benchmarks import write_csv
 from taichi_cloth import runtime
 from taichi_cloth.builder import ClothBuilder
 from taichi_cloth.errors import BlowUpError
@@ -165,10 +166,7 @@ def _kernel_table(scenes, steps: int, out: Path) -> None:
     lines += [f"| {r['integrator']} | {r['n']} | {r['kernel']} | {r['ms_per_step']:.3g} | {100 * r['share']:.1f} % |"
               for r in rows]
     (out / "kernels.md").write_text("\n".join(lines) + "\n")
-    with open(out / "kernels.csv", "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
+    write_csv(rows, out / "kernels.csv")
     print(f"wrote {out / 'kernels.md'}, {out / 'kernels.csv'}")
 
 

@@ -37,7 +37,6 @@ Writes out/bench/multilevel_garment.csv (multilevel_garment-RESOLUTION.csv with 
 from __future__ import annotations
 
 import argparse
-import csv
 import sys
 import time
 import tomllib
@@ -46,6 +45,7 @@ from pathlib import Path
 import numpy as np
 
 import taichi_cloth as tc
+from benchmarks import write_csv
 from collision.distance import unsigned_distance
 from taichi_cloth.garment.garment import RESOLUTIONS
 from taichi_cloth.garment.metrics import garment_quality
@@ -164,10 +164,7 @@ def main(argv=None) -> int:
     out = ROOT / "out" / "bench"  # the csv beside the scenes' recordings
     out.mkdir(parents=True, exist_ok=True)
     csv_path = out / f"multilevel_garment{'-' + args.resolution if args.resolution else ''}.csv"
-    with open(csv_path, "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
+    write_csv(rows, csv_path)
     print(f"wrote {csv_path}")
     return 0
 

@@ -44,7 +44,6 @@ size); the tables are printed too. Speed is measured here, never asserted in tes
 """
 from __future__ import annotations
 
-import csv
 import hashlib
 import json
 import math
@@ -59,6 +58,7 @@ import taichi as ti
 from taichi_cloth import runtime
 from taichi_cloth.errors import BlowUpError
 
+from . import write_csv as write_rows
 from . import peer_warp
 from .accuracy import Trajectory, compare, pareto_front, run_sampled
 from .peer_taichi_example import ExamplePhysics, ExampleUnavailable, TaichiExample, run_example
@@ -394,11 +394,9 @@ def report(rows: list[dict], infos: dict, settings: dict, skipped: list[str]) ->
 
 
 def write_csv(rows: list[dict], path: Path) -> None:
-    keys = [k for k, _ in COLUMNS] + sorted({k for r in rows for k in r} - {k for k, _ in COLUMNS})
-    with open(path, "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=keys, extrasaction="ignore")
-        w.writeheader()
-        w.writerows(rows)
+    """The comparison's rows, its COLUMNS first."""
+    columns = [k for k, _ in COLUMNS]
+    write_rows(rows, path, columns + sorted({k for r in rows for k in r} - set(columns)))
 
 
 def plot(rows: list[dict], infos: dict, path: Path) -> Path | None:

@@ -13,7 +13,6 @@ Writes out/bench/self_collision.csv.
 from __future__ import annotations
 
 import argparse
-import csv
 import sys
 import time
 import tomllib
@@ -21,6 +20,7 @@ from pathlib import Path
 
 import taichi as ti
 
+from benchmarks import write_csv
 from collision.intersections import count_intersecting_pairs
 from collision.self_collision import SelfCollision
 from taichi_cloth import runtime
@@ -78,10 +78,7 @@ def main(argv=None) -> int:
     rows = [measure(args.scene, on, args.frames) for on in (False, True)]
     args.out.mkdir(parents=True, exist_ok=True)
     path = args.out / "self_collision.csv"
-    with open(path, "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
+    write_csv(rows, path)
     for row in rows:
         print("  ".join(f"{k} {v}" for k, v in row.items()))
     print(f"wrote {path}")

@@ -18,7 +18,6 @@ out/bench/self_collision_stress.csv.
 from __future__ import annotations
 
 import argparse
-import csv
 import sys
 import time
 from pathlib import Path
@@ -26,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 import taichi_cloth as tc
+from benchmarks import write_csv
 from collision.intersections import count_intersecting_pairs
 from taichi_cloth import runtime
 from taichi_cloth.errors import BlowUpError
@@ -153,10 +153,7 @@ def main(argv=None) -> int:
             print("  ".join(f"{k} {v}" for k, v in row.items() if v != ""), flush=True)
     args.out.mkdir(parents=True, exist_ok=True)
     path = args.out / "self_collision_stress.csv"
-    with open(path, "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
+    write_csv(rows, path)
     print(f"wrote {path}")
     return 0
 

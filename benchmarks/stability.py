@@ -21,7 +21,6 @@ of steps. Writes stability.md, stability.csv and stability.png to --out.
 """
 from __future__ import annotations
 
-import csv
 import math
 import sys
 import time
@@ -29,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from benchmarks import write_csv
 from taichi_cloth import runtime
 from taichi_cloth.adaptive import AdaptiveOptions
 from taichi_cloth.adaptive import frame_steps, step_cap
@@ -223,14 +223,6 @@ def markdown(cells: list[dict], bounds: list[dict], args, wall: float, safety: f
     lines.append(f"{len(spared)} runs were refused by the guard yet stable; the automatic step ran stable in "
                  f"{len(bounds) - len(auto_bad)} of {len(bounds)} (integrator, mass ratio, k).")
     return "\n".join(lines) + "\n"
-
-
-def write_csv(rows: list[dict], path: Path) -> None:
-    keys = list(dict.fromkeys(k for r in rows for k in r))
-    with open(path, "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=keys)
-        w.writeheader()
-        w.writerows(rows)
 
 
 def plot(cells: list[dict], bounds: list[dict], args, path: Path) -> bool:

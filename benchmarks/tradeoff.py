@@ -35,7 +35,6 @@ quality_presets.toml) that `run --quality` reads. References are cached in --out
 """
 from __future__ import annotations
 
-import csv
 import hashlib
 import json
 import math
@@ -51,6 +50,7 @@ from taichi_cloth.integrators import integrator_class
 from taichi_cloth.quality import PRESETS_PATH
 from taichi_cloth.study_scenes import SCENES, StudyScene, energy_scale
 
+from . import write_csv as write_rows
 from .accuracy import Trajectory, compare, pareto_front, run_sampled, sample_errors
 
 #: integrator variants: label -> (integrator, options). The approx-implicit variants are docs/algorithms.md, approximate implicit variants's.
@@ -366,11 +366,9 @@ def report(study: Study, agg: list[dict], presets: dict) -> str:
 
 
 def write_csv(rows: list[dict], path: Path) -> None:
-    keys = [k for k, _ in COLUMNS] + sorted({k for r in rows for k in r} - {k for k, _ in COLUMNS} - {"key"})
-    with open(path, "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=keys, extrasaction="ignore")
-        w.writeheader()
-        w.writerows(rows)
+    """The study's rows, its COLUMNS first."""
+    columns = [k for k, _ in COLUMNS]
+    write_rows(rows, path, columns + sorted({k for r in rows for k in r} - set(columns) - {"key"}))
 
 
 def plot(study: Study, agg: list[dict], presets: dict, path: Path) -> Path | None:
