@@ -148,8 +148,7 @@ class SelfCollision(ParticleCollider):
         self.closing_kind = blk.scalar(ti.i8, 4 * P)
         self.n_closing = blk.scalar(ti.i32, ())
         blk.finalize(self)
-        self.stale = True
-        self.topology_changed(*self.shapes[0])
+        self.topology_changed(*self.shapes[0])  # also marks the candidates stale: the first step gathers
         # sized by the shape with the most (triangle, cell) pairs; built on boxes swept from x_start to x
         x_np, t_np = max(self.shapes, key=lambda s: len(s[1]) * _mean_edge(*s) ** 2)
         self.grid = VoxelGrid(self.x, self.triangles, self.n_triangles, self.cell_size,
@@ -178,6 +177,8 @@ class SelfCollision(ParticleCollider):
         self.stale = True  # the candidates name the old triangles and edges
 
     def resolve(self, dt: float) -> None:
+        """After a step of dt [s]: gather the candidates (unless every particle is still within reach), the
+        proximity passes, then the continuous stage (module docstring)."""
         if self.stale or self._left_reach():
             self.grid.build()
             self._gather()
