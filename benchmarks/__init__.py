@@ -15,13 +15,12 @@ accuracy: sampled runs and their distance to a reference, shared by tradeoff and
 Standalone scripts (`.venv/bin/python benchmarks/NAME.py`): approx_implicit_variants,
 multilevel_garment, multilevel_pays, self_collision, self_collision_stress.
 """
+import csv
 
 
 def write_csv(rows: list[dict], path, keys: list[str] | None = None) -> None:
     """Write `rows` (dicts) to the CSV file `path`: the columns `keys` (other keys are left out), or one per key in
     the order the keys first appear."""
-    import csv
-
     keys = list(dict.fromkeys(k for r in rows for k in r)) if keys is None else keys
     with open(path, "w", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=keys, extrasaction="ignore")
