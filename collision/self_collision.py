@@ -46,6 +46,8 @@ after the last pass are counted as unresolved. Rotations are not kept (Bridson's
 zone stops the sliding inside it: the zones are a last resort. The stage does not untangle a cloth that starts
 crossed (the run reports that, taichi_cloth.self_intersection).
 """
+from collections import deque
+
 import numpy as np
 import taichi as ti
 from scipy.sparse import coo_matrix
@@ -70,6 +72,8 @@ IMPULSE_PASSES, ZONE_PASSES = 16, 32
 #: the candidates gathered in a step serve the next steps while every particle stays within this many thicknesses
 #: of its motion in the step they were gathered (a calm cloth then skips the grid rebuild and the gathering)
 REUSE_MARGIN = 0.25
+#: how many steps' impact zones a SelfCollision remembers (zones_in_last)
+RECENT_STEPS = 1000
 #: additive CCD iterations per pair at most (a pair sliding past at its contact distance takes ~ l_p / 0.9 d)
 CCD_ITERATIONS = 256
 
@@ -103,6 +107,7 @@ class SelfCollision(ParticleCollider):
             raise ValueError(f"self-collision friction must be >= 0, got {friction}")
         self.fixed_thickness = None if thickness is None else float(thickness)
         self.friction, self.passes, self.continuous = float(friction), int(passes), bool(continuous)
+        self.recent_zones: deque = deque(maxlen=RECENT_STEPS)  # (dt [s], impact zones) of the last steps
         self.max_candidates = int(max_candidates)
         self.triangles, self.n_triangles = triangles, n_triangles
         self.shapes = shapes
@@ -187,17 +192,29 @@ class SelfCollision(ParticleCollider):
             if self._pass() == 0:  # nothing touched: the later passes would find nothing either
                 break
         if self.continuous:
+            self.recent_zones.append((dt, self._continuous_stage(dt)))
+
+    def _continuous_stage(self, dt: float) -> int:
+        """The continuous stage (module docstring) after a step of dt [s]; returns how many impact zones it made."""
+        self._gather_again_if_needed()
+        n = self._closing_pass()
+        for _ in range(IMPULSE_PASSES):
+            if n == 0:
+                return 0
+            self._sort_closing(n)
+            self._respond(n, 1.0 / dt)
             self._gather_again_if_needed()
             n = self._closing_pass()
-            for _ in range(IMPULSE_PASSES):
-                if n == 0:
-                    return
-                self._sort_closing(n)
-                self._respond(n, 1.0 / dt)
-                self._gather_again_if_needed()
-                n = self._closing_pass()
-            if n:
-                self._impact_zones(n, dt)
+        return self._impact_zones(n, dt) if n else 0
+
+    def zones_in_last(self, seconds: float) -> int:
+        """The impact zones made in the last `seconds` [s] of steps (at most the last RECENT_STEPS steps)."""
+        total, span = 0, 0.0
+        for dt, zones in reversed(self.recent_zones):
+            if span >= seconds:
+                break
+            total, span = total + zones, span + dt
+        return total
 
     def _sort_closing(self, n: int) -> None:
         """Put the n recorded closing pairs in a fixed order (the parallel test records them in any order, and the
@@ -209,10 +226,10 @@ class SelfCollision(ParticleCollider):
         fill_prefix(self.closing, ids[order])
         fill_prefix(self.closing_kind, kind[order])
 
-    def _impact_zones(self, n: int, dt: float) -> None:
+    def _impact_zones(self, n: int, dt: float) -> int:
         """Move the particles of the closing pairs (n found by the first pass) as rigid impact zones until no pair
-        closes (module docstring, step 3). Runs on the host: zones are rare and small, and numpy's sums keep a
-        fixed order."""
+        closes (module docstring, step 3); returns how many zones it made over its passes. Runs on the host: zones
+        are rare and small, and numpy's sums keep a fixed order."""
         P = int(self.n_particles[None])
         x0 = self.x_start.to_numpy()[:P].astype(np.float64)
         x = self.x.to_numpy()
@@ -221,7 +238,7 @@ class SelfCollision(ParticleCollider):
         motion, velocity = x[:P].astype(np.float64) - x0, v[:P].astype(np.float64)
         pinned = inv_mass == 0
         mass = np.where(pinned, 0.0, 1.0 / np.where(pinned, 1.0, inv_mass))
-        found = []
+        found, made = [], 0
         for _ in range(ZONE_PASSES):
             ids = self.closing.to_numpy()[:min(n, self.closing.shape[0])].astype(np.int64)
             self.counters[5] += n
@@ -249,12 +266,14 @@ class SelfCollision(ParticleCollider):
             v[free] = drift[zone[free]]
             self.x.from_numpy(x)
             self.v.from_numpy(v)
-            self.counters[6] += int(np.count_nonzero(count > 1))
+            made += int(np.count_nonzero(count > 1))
             self._gather_again_if_needed()
             n = self._closing_pass()
             if n == 0:
-                return
+                break
+        self.counters[6] += made
         self.counters[7] += n
+        return made
 
     def counter_values(self) -> dict:
         names = ("candidates", "edge candidates", "point-triangle contacts", "edge-edge contacts",

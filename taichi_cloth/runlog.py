@@ -93,9 +93,10 @@ def open_summary(scene) -> tuple[RunSummary, tuple]:
 
 
 def close_summary(scene, summary: RunSummary, start: tuple, intersections: IntersectionCount | None = None) -> None:
-    """Fill the summary's closing lines: simulated time, the final counts, warnings, counters per step, the steps
-    taken, the rest status, whether the stretch limit and the colliders agree, and the run's `intersections` with a
-    last count (unless it blew up)."""
+    """Fill the summary's closing lines: simulated time, the final counts, warnings (one more where self-collision
+    still needed impact zones in the run's last second), counters per step, the steps taken, the rest status,
+    whether the stretch limit and the colliders agree, and the run's `intersections` with a last count (unless it
+    blew up)."""
     t_start, stats_start, clock_start = start
     summary.sim_time = scene.state.t - t_start
     summary.n_particles, summary.n_springs = scene.model.data.n_particles, scene.model.data.n_springs
@@ -109,6 +110,13 @@ def close_summary(scene, summary: RunSummary, start: tuple, intersections: Inter
     limit, colliders = scene.controller("stretch_limit"), scene.controller("colliders")
     if limit is not None and colliders is not None:
         summary.agreement = limit_and_colliders(scene.model.data, scene.positions(), limit, colliders)
+    held = colliders.self_collision.zones_in_last(1.0) if colliders is not None and colliders.self_collision else 0
+    if held:
+        summary.warnings.append(
+            f"self-collision held parts of the cloth in {held} impact zones in the run's last second: where the "
+            "cloth cannot move without crossing itself it is stopped, so a fold in its own plane or a tight twist "
+            "locks with its stretch (docs/collision.md, self-collision; [self_collision] continuous = false lets it "
+            "cross instead)")
     if intersections is not None and summary.blowup is None:
         summary.intersections = intersections.count(scene.positions(), scene.model.data.triangles, scene.state.t)
         summary.intersections_max = intersections.largest
