@@ -631,6 +631,25 @@ class SelfCollision(ParticleCollider):
                 if toi < 1:
                     self._stop_approach(ids, True, toi, rate)
 
+    @ti.func
+    def _walk_ccd(self, row, lo, hi, skip_a, skip_b, edges: ti.template(), s, xi):
+        """The continuous test of particle `row` against the triangles near box [lo, hi] (with `edges`, of edge
+        `row` against the edges above it there), found through the grid: for a row whose candidates overflowed. A
+        triangle in several cells is tested again: harmless."""
+        cmin, cmax = self.grid.clamp_range(lo, hi)
+        for a, b, c in ti.ndrange((cmin[0], cmax[0] + 1), (cmin[1], cmax[1] + 1), (cmin[2], cmax[2] + 1)):
+            cell = self.grid.cell_index(ti.Vector([a, b, c]))
+            for m in range(self.grid.cell_start[cell], self.grid.cell_start[cell + 1]):
+                t = self.grid.cell_triangles[m]
+                if self._near(t, lo, hi, skip_a, skip_b):
+                    if ti.static(edges):
+                        for j in ti.static(range(3)):
+                            f = self.triangle_edges[t][j]
+                            if f > row and self._edge_near(f, lo, hi):
+                                self._edge_edge_ccd(row, f, s, xi)
+                    else:
+                        self._point_triangle_ccd(row, t, s, xi)
+
     @ti.kernel
     def _closing_pass(self) -> ti.i32:
         """Test every gathered pair along the step's straight-line motion and record the pairs that close; returns
@@ -645,14 +664,7 @@ class SelfCollision(ParticleCollider):
                 for k in range(self.n_cand[i]):
                     self._point_triangle_ccd(i, self.cand[i, k], s, xi)
             else:
-                lo, hi = self.reach_lo[i] - tau, self.reach_hi[i] + tau
-                cmin, cmax = self.grid.clamp_range(lo, hi)
-                for a, b, c in ti.ndrange((cmin[0], cmax[0] + 1), (cmin[1], cmax[1] + 1), (cmin[2], cmax[2] + 1)):
-                    cell = self.grid.cell_index(ti.Vector([a, b, c]))
-                    for m in range(self.grid.cell_start[cell], self.grid.cell_start[cell + 1]):
-                        t = self.grid.cell_triangles[m]
-                        if self._near(t, lo, hi, i, i):  # a triangle in several cells is tested again: harmless
-                            self._point_triangle_ccd(i, t, s, xi)
+                self._walk_ccd(i, self.reach_lo[i] - tau, self.reach_hi[i] + tau, i, i, False, s, xi)
         ti.loop_config(serialize=self.serial)
         for e in range(self.n_edges[None]):
             if self.edge_full[e] == 0:
@@ -662,16 +674,7 @@ class SelfCollision(ParticleCollider):
                 ab = self.edges[e]
                 lo = ti.min(self.reach_lo[ab[0]], self.reach_lo[ab[1]]) - tau
                 hi = ti.max(self.reach_hi[ab[0]], self.reach_hi[ab[1]]) + tau
-                cmin, cmax = self.grid.clamp_range(lo, hi)
-                for a, b, c in ti.ndrange((cmin[0], cmax[0] + 1), (cmin[1], cmax[1] + 1), (cmin[2], cmax[2] + 1)):
-                    cell = self.grid.cell_index(ti.Vector([a, b, c]))
-                    for m in range(self.grid.cell_start[cell], self.grid.cell_start[cell + 1]):
-                        t = self.grid.cell_triangles[m]
-                        if self._near(t, lo, hi, ab[0], ab[1]):
-                            for j in ti.static(range(3)):
-                                f = self.triangle_edges[t][j]
-                                if f > e and self._edge_near(f, lo, hi):
-                                    self._edge_edge_ccd(e, f, s, xi)
+                self._walk_ccd(e, lo, hi, ab[0], ab[1], True, s, xi)
         return self.n_closing[None]
 
     def describe(self) -> dict:
