@@ -112,11 +112,14 @@ def close_summary(scene, summary: RunSummary, start: tuple, intersections: Inter
         summary.agreement = limit_and_colliders(scene.model.data, scene.positions(), limit, colliders)
     held = colliders.self_collision.zones_in_last(1.0) if colliders is not None and colliders.self_collision else 0
     if held:
+        advice = (f"dt = \"auto\" in [integrator], with adaptive = {{ dt_max = {scene.clock.dt:.3g} }} to keep this "
+                  "step as the longest: it halves the step while the cloth moves fast"
+                  if not scene.clock.auto else "a finer mesh or a thinner [self_collision] thickness")
         summary.warnings.append(
             f"self-collision held parts of the cloth in {held} impact zones in the run's last second: where the "
-            "cloth cannot move without crossing itself it is stopped, so a fold in its own plane or a tight twist "
-            "locks with its stretch (docs/collision.md, self-collision; [self_collision] continuous = false lets it "
-            "cross instead)")
+            "cloth cannot move without crossing itself it is stopped, and a response at a step too long for the "
+            "motion leaves its stretch in the springs, so a fold in its own plane or a tight twist can lock; try "
+            f"{advice} (docs/collision.md, self-collision; [self_collision] continuous = false lets it cross instead)")
     if intersections is not None and summary.blowup is None:
         summary.intersections = intersections.count(scene.positions(), scene.model.data.triangles, scene.state.t)
         summary.intersections_max = intersections.largest
