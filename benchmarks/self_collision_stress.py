@@ -40,7 +40,7 @@ FLOOR = [{"type": "plane", "point": [0, 0, 0], "normal": [0, 1, 0], "friction": 
 IMPLICIT = ("implicit", "approx-implicit")
 
 
-def _step(integrator: str, step: str = "auto", fixed: float = 1 / 60) -> dict:
+def _step(integrator: str, step: str = "fixed", fixed: float = 1 / 60) -> dict:
     """The Scene's dt options: the implicit integrators at `fixed` [s], or (step "auto") at dt = "auto" with `fixed`
     as the longest step, which the motion rule halves while the cloth moves fast (taichi_cloth.adaptive); the
     explicit ones at dt = "auto"."""
