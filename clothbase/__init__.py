@@ -4,6 +4,7 @@
   meshes   triangle meshes: topology (edges, interior-edge opposites, connected components), validation with one
            clear message, repair, loading from files (trimesh)
   errors   MeshError, EngineWarning and `warn` (one line, once per message)
+  fixedpoint  to_fixed / from_fixed: sums a parallel scatter adds in any order and gets the same result
 
 The import graph of the engine is one-way: clothbase <- collision, multilevel <- taichi_cloth.
 """

@@ -54,6 +54,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from clothbase.fields import FieldBlock, fill_prefix
+from clothbase.fixedpoint import from_fixed, to_fixed
 from clothbase.meshes import edges_of
 
 from .base import ParticleCollider
@@ -144,8 +145,9 @@ class SelfCollision(ParticleCollider):
         self.box_lo = blk.vector(3, ti.f32, T)  # the boxes of the triangles' vertices' reaches [m] (_gather)
         self.box_hi = blk.vector(3, ti.f32, T)
         self.on_seam = blk.scalar(ti.i8, P)
-        self.dx = blk.vector(3, self.x.dtype, P)
-        self.dv = blk.vector(3, self.x.dtype, P)
+        # the pass's pushes on each particle [m] and [m/s], summed in fixed point: the same in any order
+        self.dx = blk.vector(3, ti.i64, P)
+        self.dv = blk.vector(3, ti.i64, P)
         self.hits = blk.scalar(ti.i32, P)
         self.reach_lo = blk.vector(3, ti.f32, P)  # each particle's reach [m] while its candidates hold
         self.reach_hi = blk.vector(3, ti.f32, P)
@@ -403,8 +405,8 @@ class SelfCollision(ParticleCollider):
                     impulse -= ti.min(friction * (-vn), vt_len) / den * vt / vt_len
             for k in ti.static(range(4)):
                 if w[k] != 0:
-                    self.dx[ids[k]] += w[k] * im[k] * lam * n
-                    self.dv[ids[k]] += w[k] * im[k] * impulse
+                    self.dx[ids[k]] += to_fixed(w[k] * im[k] * lam * n)
+                    self.dv[ids[k]] += to_fixed(w[k] * im[k] * impulse)
                     ti.atomic_add(self.hits[ids[k]], 1)
 
     @ti.func
@@ -494,8 +496,8 @@ class SelfCollision(ParticleCollider):
         self.pass_contacts[None] = 0
         ti.loop_config(serialize=self.serial)
         for i in range(self.n_particles[None]):
-            self.dx[i] = ti.Vector.zero(self.x.dtype, 3)
-            self.dv[i] = ti.Vector.zero(self.x.dtype, 3)
+            self.dx[i] = ti.Vector.zero(ti.i64, 3)
+            self.dv[i] = ti.Vector.zero(ti.i64, 3)
             self.hits[i] = 0
         ti.loop_config(serialize=self.serial)
         for i in range(self.n_particles[None]):
@@ -517,8 +519,8 @@ class SelfCollision(ParticleCollider):
         ti.loop_config(serialize=self.serial)
         for i in range(self.n_particles[None]):
             if self.hits[i] > 0:
-                self.x[i] += self.dx[i] / self.hits[i]
-                self.v[i] += self.dv[i] / self.hits[i]
+                self.x[i] += from_fixed(self.dx[i], self.x.dtype) / self.hits[i]
+                self.v[i] += from_fixed(self.dv[i], self.x.dtype) / self.hits[i]
         return self.pass_contacts[None]
 
     # ------------------------------------------------------------------ the continuous stage
