@@ -56,35 +56,7 @@ def test_a_sheet_folded_through_itself_has_intersecting_pairs_and_a_flat_one_non
     assert count_intersecting_pairs(x, t) > 5
 
 
-# ---------------------------------------------------------------------- a plain sheet, a garment
-@pytest.mark.slow
-def test_self_collision_keeps_a_folded_towel_in_two_layers():
-    """A towel on the floor gets one edge carried over onto the other half (a keyframed pin). Without
-    self-collision the folded half sinks through into the floor layer; with it, it rests on the bottom half."""
-    n = 12
-    L = 0.6
-
-    def fold(self_collision):
-        cloth = tc.ClothBuilder.grid((L, L / 2), (2 * n, n), "cotton", center=(0.0, 0.003, 0.0), plane="xz")
-        keys = [[t, -L / 2 * (1 - np.cos(np.pi * t)), 0.18 * np.sin(np.pi * t), 0.0] for t in np.linspace(0, 1, 11)]
-        keys[-1][1:3] = [-L + 0.01, 0.015]
-        edge = [i for i in range(2 * n * n) if i % (2 * n) == 2 * n - 1]
-        sc = tc.Scene(cloth, integrator="implicit", dt=1 / 240, air_damping=1.0, self_collision=self_collision,
-                      pins=[{"indices": edge, "path": keys}], integrator_options={"cg_tolerance": 1e-3},
-                      colliders=[{"type": "plane", "point": [0, 0, 0], "normal": [0, 1, 0]}])
-        sc.step(360)
-        top = cloth.positions[:, 0] > 0.0  # the half that was carried over
-        return np.mean(sc.positions()[top, 1] < 0.003 + 0.003), sc
-
-    sunk_without, _ = fold(False)
-    sunk_with, sc = fold(True)
-    assert sunk_without > 0.6
-    assert sunk_with < 0.3
-    assert sc.controller("colliders").objects[-1].counter_values()["point-triangle contacts"] > 0
-    assert count_intersecting_pairs(sc.positions(), sc.model.data.triangles) == 0
-
-
-
+# ---------------------------------------------------------------------- a garment
 def square(name, size=0.2):
     return PatternPiece.from_polygon(name, [[0, 0], [size, 0], [size, size], [0, size]],
                                      corner_names=["bl", "br", "tr", "tl"])
