@@ -13,7 +13,8 @@ Suites of `python -m taichi_cloth bench SUITE` (each with add_arguments(parser) 
 accuracy: sampled runs and their distance to a reference, shared by tradeoff and peers.
 
 Standalone scripts (`.venv/bin/python benchmarks/NAME.py`): approx_implicit_variants,
-multilevel_garment, multilevel_pays, self_collision, self_collision_stress.
+multilevel_garment, multilevel_pays, self_collision, self_collision_stress; and `python -m benchmarks.gpu_check`, the
+whole GPU measurement in one command (on a GPU machine lent for a few minutes).
 """
 import csv
 
