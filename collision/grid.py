@@ -16,6 +16,10 @@ import taichi as ti
 from clothbase.fields import FieldBlock
 
 
+#: cells per block of the parallel prefix sum (VoxelGrid._scan)
+SCAN_BLOCK = 256
+
+
 @ti.data_oriented
 class VoxelGrid:
     """Cells of edge `cell_size` [m] over the AABB of `vertices` (a (V,) vec3 field) plus `margin` [m].
@@ -53,6 +57,7 @@ class VoxelGrid:
         self.origin = blk.vector(3, ti.f32, ())
         self.cell_count = blk.scalar(ti.i32, n_cells)
         self.cell_start = blk.scalar(ti.i32, n_cells + 1)
+        self.block_count = blk.scalar(ti.i32, -(-n_cells // SCAN_BLOCK))  # cells of each scan block (parallel scan)
         self.cell_triangles = blk.scalar(ti.i32, self.pair_capacity)
         blk.finalize(self)
         self.n_pairs = 0
@@ -144,13 +149,34 @@ class VoxelGrid:
 
     @ti.kernel
     def _scan(self) -> ti.i32:
-        # an exclusive prefix sum; serial, it is ~1e5 additions once per build
+        """cell_start = the exclusive prefix sum of cell_count; returns the total. Serial: one thread, ~1e5
+        additions once per build. Parallel (no loop in one thread: a GPU): each block of SCAN_BLOCK cells sums
+        itself, then starts after the sum of the blocks before it (each block adds those up itself: a few hundred
+        additions each) and scans its own cells."""
         total = 0
-        ti.loop_config(serialize=True)
-        for c in range(self.n_cells):
-            self.cell_start[c] = total
-            total += self.cell_count[c]
-        self.cell_start[self.n_cells] = total
+        if ti.static(self.serial):
+            ti.loop_config(serialize=True)
+            for c in range(self.n_cells):
+                self.cell_start[c] = total
+                total += self.cell_count[c]
+            self.cell_start[self.n_cells] = total
+        else:
+            B, NB = ti.static(SCAN_BLOCK), ti.static(-(-self.n_cells // SCAN_BLOCK))
+            for b in range(NB):
+                acc = 0
+                for c in range(b * B, ti.min((b + 1) * B, self.n_cells)):
+                    acc += self.cell_count[c]
+                self.block_count[b] = acc
+            for b in range(NB):
+                start = 0
+                for a in range(b):
+                    start += self.block_count[a]
+                for c in range(b * B, ti.min((b + 1) * B, self.n_cells)):
+                    self.cell_start[c] = start
+                    start += self.cell_count[c]
+                if b == NB - 1:
+                    self.cell_start[self.n_cells] = start
+            total = self.cell_start[self.n_cells]
         return total
 
     @ti.kernel

@@ -121,6 +121,18 @@ class Controller:
         """After a frame (the state is measured and sane); a change is applied by the scene."""
         return None
 
+    #: device values this controller needs every frame, carried by the frame's one read (the measurement): a
+    #: controller with report_slots > 0 implements report(out, offset), a kernel writing them into out[offset:
+    #: offset + report_slots] (float64), and reported(values), which gets them back as a numpy array before
+    #: after_frame. Reading its own fields in after_frame would cost the frame a second round trip.
+    report_slots: int = 0
+
+    def report(self, out, offset: int) -> None:
+        """Write this controller's report_slots values into out[offset:] (a Taichi kernel)."""
+
+    def reported(self, values) -> None:
+        """The values report wrote, read with the frame's measurement."""
+
     def model_changed(self, change: ModelChange, t: float, dt: float) -> None:
         """After the scene applied `change` (from this controller or another) at time t [s]; dt [s] is the step
         from now on. Refill what depends on the model (limited springs, pinned particles...)."""

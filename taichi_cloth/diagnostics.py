@@ -42,6 +42,9 @@ class Measurement:
 class Diagnostics:
     """Measures the state of (model, state, forces). fast_speed [m/s]: the threshold of Measurement.motion_fast."""
 
+    #: slots of the measurement's read that controllers may fill (Controller.report_slots)
+    REPORT_CAPACITY = 16
+
     def __init__(self, model, state, forces, fast_speed: float = 1e-3, staggered: bool = False):
         self.model, self.state, self.forces = model, state, forces
         self.fast_speed = float(fast_speed)
@@ -50,9 +53,10 @@ class Diagnostics:
         #: seem to drift: an undamped swing read 1.7e-3 of its kinetic energy off with the one-sided velocity
         self.staggered = bool(staggered)
         blk = FieldBlock()
-        self.out = blk.scalar(ti.f64, 8)
+        self.out = blk.scalar(ti.f64, 8 + self.REPORT_CAPACITY)
         self.x_last = blk.vector(3, model.fp, model.capacity[0])  # the positions at the last measurement [m]
         blk.finalize(self)
+        self._reporters: list[tuple[object, int]] = []  # (controller, its first slot in out)
         self._t_last: float | None = None  # simulated time of x_last; None: no valid x_last
         self._motion = (math.inf, 1.0)
 
@@ -61,13 +65,25 @@ class Diagnostics:
         self._t_last = None
         self._motion = (math.inf, 1.0)
 
+    def add_reporter(self, controller) -> None:
+        """Carry `controller`'s per-frame values (Controller.report_slots) in every measurement's one read."""
+        used = sum(c.report_slots for c, _ in self._reporters)
+        if used + controller.report_slots > self.REPORT_CAPACITY:
+            raise ValueError(f"the controllers' reports need more than {self.REPORT_CAPACITY} slots")
+        self._reporters.append((controller, 8 + used))
+
     def measure(self, dt: float = 0.0) -> Measurement:
-        """The state now; dt [s]: the last step (staggered velocities are read half of it ahead)."""
+        """The state now, and the reporting controllers' values, in one read of the device; dt [s]: the last step
+        (staggered velocities are read half of it ahead)."""
         t = float(self.state.t)
         elapsed = 0.0 if self._t_last is None else t - self._t_last
         update = self._t_last is None or elapsed > 0  # a second measurement at the same time keeps the motion
         self._measure(elapsed if elapsed > 0 else 0.0, self.fast_speed, int(update), 0.5 * float(dt))
+        for controller, offset in self._reporters:
+            controller.report(self.out, offset)
         o = self.out.to_numpy()
+        for controller, offset in self._reporters:
+            controller.reported(o[offset:offset + controller.report_slots])
         if update:
             self._motion = (float(o[_MOTION]), float(o[_FAST])) if elapsed > 0 else (math.inf, 1.0)
             self._t_last = t

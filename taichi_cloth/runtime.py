@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import atexit
 import os
+import sys
 import time
 from pathlib import Path
 
@@ -110,11 +111,19 @@ def gpu_arch():
     return ti.cpu
 
 
+def one_thread_loops() -> bool:
+    """Whether any loop may run in one thread on this arch: on the CPU only. A GPU thread alone is slow, so there
+    every loop runs in parallel, and what is sequential by nature (a dense factor, a fixed-order reduction) takes
+    launches instead (linear.dense). TAICHI_CLOTH_GPU_LOOPS=1 makes the CPU follow the GPU's policy, so that its
+    paths run, and are tested, here (at their cost on the CPU)."""
+    return impl.current_cfg().arch == ti.cpu and os.environ.get("TAICHI_CLOTH_GPU_LOOPS", "0") in ("", "0")
+
+
 def serial_loops(n_particles: int, default: int = PARALLEL_FROM_CPU) -> bool:
-    """Whether a cloth of n_particles should run its kernels' loops in one thread: on the CPU, below `default`
-    particles (the integrator's parallel_from_cpu), or below the count init(parallel_from=...) or
-    TAICHI_CLOTH_PARALLEL_FROM set for every integrator."""
-    if impl.current_cfg().arch != ti.cpu:
+    """Whether a cloth of n_particles should run its kernels' loops in one thread: where one_thread_loops() allows
+    it (the CPU), below `default` particles (the integrator's parallel_from_cpu), or below the count
+    init(parallel_from=...) or TAICHI_CLOTH_PARALLEL_FROM set for every integrator."""
+    if not one_thread_loops():
         return False
     threshold = _parallel_from
     if threshold is None:
@@ -173,3 +182,36 @@ class CompileCounter:
 
     def names(self) -> list[str]:
         return sorted(self.compiled)
+
+
+def _compiling_function() -> str:
+    """The qualified name of the kernel or Taichi function being compiled (from Taichi's AST builder's context)."""
+    frame = sys._getframe(2)
+    while frame is not None:
+        ctx = frame.f_locals.get("ctx")
+        if ctx is not None and getattr(ctx, "func", None) is not None and hasattr(ctx.func, "func"):
+            return ctx.func.func.__qualname__
+        frame = frame.f_back
+    return "?"
+
+
+class OneThreadLoops:
+    """The functions whose loops were compiled to run in one thread (ti.loop_config(serialize=True)) inside a `with`
+    block: `sites`, a set of qualified names ("PCG._solve_in_thread"). Tests use it to hold the loop policy
+    (one_thread_loops): on a GPU, none."""
+
+    def __enter__(self) -> "OneThreadLoops":
+        self.sites: set[str] = set()
+        self._original = ti.loop_config
+
+        def loop_config(*args, **kwargs):
+            if kwargs.get("serialize") or kwargs.get("parallelize") == 1:
+                self.sites.add(_compiling_function())
+            return self._original(*args, **kwargs)
+
+        loop_config.__module__ = self._original.__module__  # Taichi's own: its AST builder calls it as such
+        ti.loop_config = loop_config
+        return self
+
+    def __exit__(self, *exc) -> None:
+        ti.loop_config = self._original

@@ -21,6 +21,7 @@ from .blowup import blowup_error, blowup_reason
 from .control import FrameInfo, ModelChange, overrides
 from .diagnostics import Measurement
 from .errors import BlowUpError
+from .hostreads import HostReads
 from .normals import VertexNormals
 from .runlog import FrameLog, close_summary, open_summary
 from .self_intersection import IntersectionCount
@@ -60,6 +61,7 @@ class Scene:
         self.steps_taken = 0
         self.topology_version = 0  # counts the changes of the cloth's triangles
         self._notes: list[tuple[str, str]] = []  # (level, text) since they were last collected
+        self._step_reads = HostReads()  # the host reads inside the last frame's steps (taichi_cloth.hostreads)
         self._bind_hooks()
 
     def _bind_hooks(self) -> None:
@@ -78,6 +80,8 @@ class Scene:
     def add_controller(self, controller) -> None:
         """Add a controller of your own (a taichi_cloth.control.Controller): its hooks run after the scene's own."""
         self.controllers.append(controller)
+        if getattr(controller, "report_slots", 0):
+            self.diagnostics.add_reporter(controller)
         self._bind_hooks()
 
     def controller(self, name: str):
@@ -251,22 +255,29 @@ class Scene:
                        counts)
         log.begin(self, translation)
         frame = 0
+        reads = HostReads()
         try:
             for frame in range(1, frames + 1):
                 t0 = time.perf_counter()
-                m, n, simulated = self._frame(frame, summary)
+                with reads:
+                    m, n, simulated = self._frame(frame, summary)
                 elapsed = time.perf_counter() - t0
                 summary.count_frame(frame, n, elapsed, simulated, compiling=frame == 1 < frames)
                 self.clock.observe(m.max_speed, n)
                 version = self.topology_version
                 info = FrameInfo(frame, self.state.t, self.steps_taken, m)
-                for change in (hook(info) for hook in self._after_frame):
-                    if change is not None:
-                        self.apply(change)
-                        m = self.measure()
-                summary.measured(m)
-                busy = next((c.busy for c in self.controllers if c.busy), None)
-                rest = self.rest.observe(self.state.t, m, busy)
+                with reads:
+                    for change in (hook(info) for hook in self._after_frame):
+                        if change is not None:
+                            self.apply(change)
+                            m = self.measure()
+                    summary.measured(m)
+                    busy = next((c.busy for c in self.controllers if c.busy), None)
+                    rest = self.rest.observe(self.state.t, m, busy)
+                if frame > 1:
+                    summary.host_reads_steps += self._step_reads.total
+                    summary.host_reads_frames += reads.total - self._step_reads.total
+                reads.by_site.clear()
                 stop = until_rest and rest.at_rest
                 log.frame(self, frame, m, n / elapsed if elapsed > 0 else None, self.topology_version != version,
                           last=stop)
@@ -287,11 +298,13 @@ class Scene:
         at a smaller step when the clock can (dt = "auto"); otherwise the BlowUpError propagates. Returns the
         measurement, the steps and the simulated seconds of the frame."""
         clock = self.clock
+        self._step_reads = HostReads()  # the reads inside the steps (the run's summary counts them apart)
         while True:
             n, dt = clock.frame()
             clock.start_frame()
             steps_before, t_before = self.steps_taken, self.state.t
-            self.advance(n, dt)
+            with self._step_reads:
+                self.advance(n, dt)
             try:
                 m = self.check()  # also syncs: the measurement reads the device
                 summary.took_step(dt)

@@ -16,10 +16,11 @@ back out after the step, and the two fought every step (20 unconverged passes a 
 tighter than the body under it kept the garment below moving at 25-30 mm/s for good. What the limit leaves on the
 body, the run summary reports (springs over the limit while no particle is inside a collider).
 
-The test is made on the device: CHUNK passes run in one launch, each one only while the last left an excess above
-the tolerance, and the host reads one flag per launch (a step that converges in a few passes costs one launch
-and one read, where a read per pass used to stall the step). The pass counters stay on the device until `stats`
-is read.
+The test is made on the device. A cloth whose loops run in one thread (the CPU's small and medium cloths) takes
+every pass of a step in one launch, a device loop that ends when the limit holds: no read. A parallel one runs
+CHUNK passes per launch, each only while the last left an excess above the tolerance, and the host reads one flag
+per launch (a step that converges in a few passes costs one launch and one read). The pass counters stay on the
+device until `stats` is read.
 """
 import numpy as np
 import taichi as ti
@@ -91,7 +92,11 @@ class StretchLimit(Controller):
 
     def apply(self, dt: float) -> None:
         """Correct positions (and velocities) after a step of dt [s]. The largest excess strain left before the last
-        pass stays in `worst` on the device (reading it would stall the step)."""
+        pass stays in `worst` on the device (reading it would stall the step). A cloth whose loops run in one thread
+        takes every pass in one launch, the test a device loop: no read at all."""
+        if self.model.serial:
+            self._passes_in_thread(dt, self.max_strain, self.omega, self.tolerance, self.iterations)
+            return
         first = 1
         while first or self.counters[self._ACTIVE]:
             self._passes(dt, self.max_strain, self.omega, self.tolerance, self.iterations, first)
@@ -100,34 +105,53 @@ class StretchLimit(Controller):
     @ti.kernel
     def _passes(self, dt: ti.f64, max_strain: ti.f64, omega: ti.f64, tolerance: ti.f64, iterations: ti.i32,
                 first: ti.i32):
+        c = ti.static(self.counters)
+        if first != 0:
+            c[self._ACTIVE] = 1
+            c[self._PASSES] = 0
+        for _ in ti.static(range(self.CHUNK)):  # unrolled: every pass stays a top-level loop
+            self._pass(dt, max_strain, omega, tolerance, iterations)
+
+    @ti.kernel
+    def _passes_in_thread(self, dt: ti.f64, max_strain: ti.f64, omega: ti.f64, tolerance: ti.f64,
+                          iterations: ti.i32):
+        c = ti.static(self.counters)
+        ti.loop_config(serialize=True)
+        for _ in range(1):
+            c[self._ACTIVE] = 1
+            c[self._PASSES] = 0
+            go = 1  # (a while on the field itself fails Taichi's IR check, 1.7.4)
+            while go != 0:
+                self._pass(dt, max_strain, omega, tolerance, iterations)
+                go = c[self._ACTIVE]
+
+    @ti.func
+    def _pass(self, dt, max_strain, omega, tolerance, iterations):
+        """One Jacobi pass while the last one left an excess above the tolerance (a no-op once none did)."""
         m, s = self.model, self.state
         c = ti.static(self.counters)
         h = ti.cast(dt, m.fp)
         limit = 1.0 + ti.cast(max_strain, m.fp)
         w = ti.cast(omega, m.fp)
-        if first != 0:
-            c[self._ACTIVE] = 1
-            c[self._PASSES] = 0
-        for _ in ti.static(range(self.CHUNK)):  # unrolled: every pass stays a top-level loop
+        if c[self._ACTIVE] != 0:
+            self.worst[None] = 0.0
+        ti.loop_config(serialize=self.model.serial)
+        for i in range(m.n_particles[None]):
             if c[self._ACTIVE] != 0:
-                self.worst[None] = 0.0
-            ti.loop_config(serialize=self.model.serial)
-            for i in range(m.n_particles[None]):
-                if c[self._ACTIVE] != 0:
-                    self._correction(i, limit, w)
-            ti.loop_config(serialize=self.model.serial)
-            for i in range(m.n_particles[None]):
-                if c[self._ACTIVE] != 0:
-                    s.x[i] += self.dx[i]
-                    s.v[i] += self.dx[i] / h
+                self._correction(i, limit, w)
+        ti.loop_config(serialize=self.model.serial)
+        for i in range(m.n_particles[None]):
             if c[self._ACTIVE] != 0:
-                c[self._PASSES] += 1
-                c[self._TOTAL] += 1
-                if self.worst[None] <= tolerance:
-                    c[self._ACTIVE] = 0
-                elif c[self._PASSES] >= iterations:
-                    c[self._ACTIVE] = 0
-                    c[self._UNCONVERGED] += 1
+                s.x[i] += self.dx[i]
+                s.v[i] += self.dx[i] / h
+        if c[self._ACTIVE] != 0:
+            c[self._PASSES] += 1
+            c[self._TOTAL] += 1
+            if self.worst[None] <= tolerance:
+                c[self._ACTIVE] = 0
+            elif c[self._PASSES] >= iterations:
+                c[self._ACTIVE] = 0
+                c[self._UNCONVERGED] += 1
 
     @ti.func
     def _weight(self, i):

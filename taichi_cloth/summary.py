@@ -16,6 +16,9 @@ class RunSummary:
     sim_time: simulated seconds of this run (from its start, not from t = 0).
     wall_step: stepping and per-frame checks over frames 2.. (frame 1 compiles the kernels: first_frame_wall);
     timed_steps, timed_sim: the steps and simulated seconds inside wall_step; wall_record: recorder calls, frames 2..
+    host_reads_steps, host_reads_frames: the host's reads of device data (taichi_cloth.hostreads) inside the steps,
+    and in the frames' own work (the measurement, the controllers' frame hooks), over frames 2..; the outputs (a
+    recording's snapshots, the quarter-second intersection counts) are not counted.
     """
 
     name: str
@@ -45,6 +48,8 @@ class RunSummary:
     dt_min: float | None = None
     dt_max: float | None = None
     timed_sim: float = 0.0
+    host_reads_steps: int = 0
+    host_reads_frames: int = 0
     steps_line: str | None = None
     solver: str | None = None  # how the integrator solves its step (e.g. its preconditioner)
     events: list[str] = field(default_factory=list)  # what happened on the way (seams joined, level switches...)
@@ -99,6 +104,9 @@ class RunSummary:
             ms = 1e3 * self.wall_step / max(self.timed_steps, 1)
             lines.append(f"  speed: {self.steps_per_s:,.0f} steps/s, {ms:.3f} ms/step, {self.realtime_factor:.2f}x "
                          f"real time (frames 2..; frame 1 with compiles took {self.first_frame_wall:.2f} s)")
+            frames = max(self.frames - 1, 1)
+            lines.append(f"  host reads: {self.host_reads_steps / max(self.timed_steps, 1):.2g} per step inside the "
+                         f"steps, {self.host_reads_frames / frames:.2g} per frame besides (frames 2..)")
             if self.wall_record > 0:
                 lines.append(f"  recording: {1e3 * self.wall_record / max(self.frames - 1, 1):.2f} ms/frame, "
                              f"{100 * self.wall_record / (self.wall_step + self.wall_record):.1f} % of the loop")

@@ -29,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 import taichi as ti
 
+from clothbase.fields import FieldBlock
 from clothbase.meshes import connected_components, edges_of, rows_in
 
 from ..cloth import ClothData, SpringKind
@@ -113,6 +114,13 @@ class Sewing(Controller):
         k_seam = garment.data.stiffness[self.first:].max() if self.count else 0.0
         self.energy_floor = max(0.5 * float(k_seam) * options.epsilon ** 2, 1e-12)
         self.history: list[SeamGap] = []
+        blk = FieldBlock()
+        self.pair_ends = blk.vector(2, ti.i32, max(self.count, 1))  # the seam pairs' particles before a join
+        self.merged = blk.scalar(ti.i32, ())  # 1 once the pairs are merged (every gap is then 0)
+        blk.finalize(self)
+        if self.count:
+            self.pair_ends.from_numpy(np.ascontiguousarray(garment.seam_pairs, dtype=np.int32))
+        self._gap: tuple[float, float] | None = None  # (largest, mean) [m] read with the frame's measurement
         self._start()
 
     def _start(self) -> None:
@@ -128,6 +136,7 @@ class Sewing(Controller):
         self.joined = False
         self.gave_up = False
         self._energy = None
+        self.merged[None] = 0
         if self.active and not self.options.gravity:
             self.forces.set_gravity((0.0, 0.0, 0.0))
         self._body_friction(not self.active)
@@ -174,6 +183,26 @@ class Sewing(Controller):
             m.rest_length[s] = ti.cast(L0, self.model.fp)
 
     # ------------------------------------------------------------------ per frame
+    report_slots = 2  # the largest and mean seam gap, read with the frame's measurement
+
+    @ti.kernel
+    def report(self, out: ti.template(), offset: ti.i32):
+        """out[offset], out[offset + 1] = the largest and the mean distance [m] between the particles of a seam pair
+        (0 once merged)."""
+        largest = ti.cast(0.0, ti.f64)
+        total = ti.cast(0.0, ti.f64)
+        ti.loop_config(serialize=self.model.serial)
+        for k in range(ti.select(self.merged[None] != 0, 0, self.count)):
+            e = self.pair_ends[k]
+            gap = (ti.cast(self.x[e[1]], ti.f64) - ti.cast(self.x[e[0]], ti.f64)).norm()
+            ti.atomic_max(largest, gap)
+            total += gap
+        out[offset] = largest
+        out[offset + 1] = total / ti.static(max(self.count, 1))
+
+    def reported(self, values) -> None:
+        self._gap = (float(values[0]), float(values[1]))
+
     def gaps(self, x: np.ndarray | None = None) -> np.ndarray:
         """(K,) distance [m] between the two particles of every seam pair now (0 for merged pairs)."""
         x = self.state.positions() if x is None else x
@@ -192,17 +221,20 @@ class Sewing(Controller):
     def after_frame(self, frame: FrameInfo) -> ModelChange | None:
         """Record the seam gap, and join the seams once they are closed and the elastic energy has settled
         (changed by less than energy_tolerance of itself, or of one seam pair's energy at the closing gap)."""
-        g = self.gaps()
-        self.history.append(SeamGap(frame.t, float(g.max()) if len(g) else 0.0, float(g.mean()) if len(g) else 0.0))
+        if self._gap is None:  # (no measurement carried it: read the positions)
+            g = self.gaps()
+            self._gap = (float(g.max()), float(g.mean())) if len(g) else (0.0, 0.0)
+        largest, mean = self._gap
+        self._gap = None
+        self.history.append(SeamGap(frame.t, largest, mean))
         if not self.active:
             return None
         m = frame.measurement
         previous, self._energy = self._energy, m.elastic
         settled = previous is not None and abs(m.elastic - previous) <= self.options.energy_tolerance * max(
             abs(m.elastic), self.energy_floor)
-        largest = float(g.max()) if len(g) else 0.0
         stalled = largest < self.stall_gap and self._stalled(frame.t, largest)
-        if len(g) and (largest < self.options.epsilon or stalled) and settled:
+        if self.count and (largest < self.options.epsilon or stalled) and settled:
             self.closed_at = frame.t
             return self._join(frame, largest, stalled=largest >= self.options.epsilon)
         if frame.t >= self.options.max_time:
@@ -210,6 +242,7 @@ class Sewing(Controller):
             self.active = False
             self.forces.set_gravity(self.gravity)
             self._body_friction(True)
+            g = self.gaps()
             opened = ", ".join(f"{k} ({1e3 * v:.1f} mm)" for k, v in self.open_seams(g).items())
             return ModelChange(warning=f"sewing gave up after {self.options.max_time:g} s: open seams "
                                        f"{opened or 'none'} (largest gap {1e3 * g.max():.1f} mm, epsilon "
@@ -241,6 +274,7 @@ class Sewing(Controller):
                              viscosity=data.viscosity)
         elif join == "merge":
             data, x, v, self.current_of = merge_seams(data, self.garment, x, v)
+            self.merged[None] = 1
         what = {"merge": "pairs merged", "spring": "pairs joined by stiff springs", "none": "seam springs kept"}[join]
         how = (f"stalled at a largest gap of {1e3 * gap:.2f} mm, below {self.options.stall_gap:g} of the seam spacing"
                if stalled else f"largest gap {1e3 * gap:.2f} mm")

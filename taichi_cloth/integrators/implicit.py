@@ -31,8 +31,6 @@ filtered), for leaving only: the line search removes from every candidate the ve
 such a particle, and a particle it had to correct is held (filtered) in any further Newton iteration (an active set).
 """
 
-import math
-
 import taichi as ti
 
 from clothbase.errors import warn
@@ -41,6 +39,9 @@ from clothbase.fields import FieldBlock
 from ..linear import PCG, PRECONDITIONERS, BlockSystem, ConstraintFilter, PreconditionerPolicy
 from ..runtime import PARALLEL_FROM_CPU_SOLVE
 from .base import Integrator, Option, at_least_one, one_of, positive
+
+#: the slots of Implicit.tally (Implicit.TALLY names them)
+_CG, _UNCONVERGED, _NEWTON, _CUTS, _RESIDUAL, _CAPPED_RISE, _NONFINITE = range(7)
 
 
 @ti.data_oriented
@@ -74,6 +75,10 @@ class Implicit(Integrator):
     #: the step lengths the line search tries, longest first, and the sufficient decrease it asks for
     ALPHAS = (1.0, 0.5, 0.25, 0.125)
     ARMIJO = 1e-4
+    #: the device tally's slots: the four counters `stats` reports, the last step's relative residual, the largest
+    #: energy rise [J] of a step that spent its CG budget, and the solves that gave a non-finite value
+    TALLY = ("cg_iterations", "cg_unconverged_steps", "newton_iterations", "line_search_cuts", "last_residual",
+             "capped_rise", "nonfinite_solves")
 
     def __init__(self, model, state, forces, **options):
         super().__init__(model, state, forces, **options)
@@ -90,9 +95,12 @@ class Implicit(Integrator):
         self.ip = blk.scalar(ti.f64, len(self.ALPHAS) + 2)  # IP(alpha = 0), IP(ALPHAS...), grad.dv [J]
         self.energy = blk.scalar(ti.f64, len(self.ALPHAS) + 2)  # E(alpha = 0), E(ALPHAS...), E at the start [J]
         self.cut = blk.scalar(ti.i32, ())             # line-search cuts in this step
+        #: the step's Newton decisions, on the device: the first decrement [J], the last rise [J] and residual, and
+        #: whether a solve stopped short of the tolerance
+        self.newton = blk.scalar(ti.f64, 4)
+        #: the counters of every step so far, kept on the device and read when `stats` is asked for (TALLY order)
+        self.tally = blk.scalar(ti.f64, len(self.TALLY))
         blk.finalize(self)
-        self.stats = {"cg_iterations": 0, "cg_unconverged_steps": 0, "newton_iterations": 0, "line_search_cuts": 0}
-        self.last_residual = 0.0  # sqrt(r.Pr / b.Pb) at the end of the last step
         self._warned_cap = False
         self._warned_nan = False
         # Jacobi-PCG starts from the previous step's dv: it carries over the smooth part Jacobi is slow to find;
@@ -106,6 +114,35 @@ class Implicit(Integrator):
         """Forget the previous step's velocity change (the warm start)."""
         self.dv.fill(0)
         self.dv_total.fill(0)
+
+    @property
+    def stats(self) -> dict[str, float]:
+        """The cumulative counters (CG and Newton iterations, unconverged steps, line-search cuts): one read of the
+        device tally. Says once, as a warning, when a step spent its CG budget and gained energy, or a solve gave a
+        non-finite value, since the last read."""
+        t = dict(zip(self.TALLY, (float(v) for v in self.tally.to_numpy())))
+        if t["capped_rise"] > 0 and not self._warned_cap:
+            self._warned_cap = True  # backward Euler only dissipates: say it once when the cap let a step gain energy
+            warn(f"implicit: CG stopped at its cap of {self.options['cg_max_iterations']} iterations (relative "
+                 f"residual {t['last_residual']:.2g}) and the step gained {t['capped_rise']:.3g} J; raise "
+                 "cg_max_iterations" + (' or set preconditioner = "multigrid"'
+                                        if self.policy.current is self.policy.jacobi else ""))
+        if t["nonfinite_solves"] > 0 and not self._warned_nan:
+            self._warned_nan = True
+            warn(f"implicit: the CG solve gave a non-finite value with {self.policy.detail}; the step took no "
+                 "implicit correction")
+        return {k: t[k] for k in self.TALLY[:4]}
+
+    @stats.setter
+    def stats(self, values: dict[str, float]) -> None:
+        if values:  # (the base class's empty dict at construction: the tally is not built yet)
+            for k, v in values.items():
+                self.tally[self.TALLY.index(k)] = v
+
+    @property
+    def last_residual(self) -> float:
+        """sqrt(r.Pr / b.Pb) at the end of the last step (inf after a non-finite solve); one device read."""
+        return float(self.tally[self.TALLY.index("last_residual")])
 
     # ------------------------------------------------------------------ the preconditioner
     @property
@@ -135,50 +172,27 @@ class Implicit(Integrator):
 
     # ------------------------------------------------------------------ the step
     def _advance(self, dt: float) -> None:
-        tolerance = self.options["cg_tolerance"]
+        """The step's Newton iterations, decided on the device: each launches its kernels, and once an iteration
+        decided that the step is done (the line search's end) the later ones loop over nothing (system.live 0).
+        Where CG reads the device anyway (its parallel chunks), the host reads that decision too and stops
+        launching."""
+        o = self.options
         self.system.set_step(dt, self.forces.air_damping_value)
         if self.has_contacts:
             self._contact_friction(dt)  # before the step's start is kept: it changes velocities
         self._begin()
-        its, unconverged, residual, first_decrement = 0, 0, 0.0, None
-        budget = self.options["cg_max_iterations"]  # per step: a further Newton iteration spends what is left
-        converge = self.options["newton_converge"]
-        for k in range(self.options["newton_iterations"]):
+        n = o["newton_iterations"]
+        for k in range(n):
             self._assemble(dt, self.system.h_gamma, int(k == 0))
             preconditioner = self.policy.current
             preconditioner.prepare(self.system, self.filter)
-            self.pcg.solve(self.system, self.filter, preconditioner, tolerance, budget - its)
-            # the line search returns what the host needs of this iteration: one read per Newton iteration
-            it, rz, rz_b, decrement, rise = self._line_search(dt, int(self.options["line_search"]))
-            if not (math.isfinite(rz) and math.isfinite(rz_b)):
-                residual = math.inf  # a preconditioner that returned NaN: CG stopped at once, the step is explicit
-                if not self._warned_nan:
-                    self._warned_nan = True
-                    warn(f"implicit: the CG solve gave a non-finite value with {self.policy.detail}; the step took "
-                         "no implicit correction")
-            else:
-                residual = math.sqrt(max(rz, 0.0) / rz_b) if rz_b > 0 else 0.0
-            its += int(it)
-            unconverged += int(residual > self.options["cg_tolerance"])
-            self.stats["newton_iterations"] += 1
-            if first_decrement is None:
-                first_decrement = decrement
-            # enough: the iterate has not gained energy on the step's start (backward Euler only dissipates; a
-            # global test, blind to one particle speeding up: hence newton_converge), Newton has converged, or the
-            # step's CG budget is spent
-            converged = decrement <= self.options["newton_tolerance"] * first_decrement
-            if (rise <= 0.0 and not converge) or converged or its >= budget:
+            self.pcg.solve(self.system, self.filter, preconditioner, o["cg_tolerance"], o["cg_max_iterations"])
+            self._line_search(dt, int(o["line_search"]), k, n, o["cg_max_iterations"], o["cg_tolerance"],
+                              o["newton_tolerance"], int(o["newton_converge"]))
+            in_thread = self.model.serial and (preconditioner.inline or preconditioner.in_thread)
+            if not in_thread and k + 1 < n and self.system.live[None] == 0:
                 break
-        self._finish(dt)
-        if rise > 0.0 and its >= budget and not self._warned_cap:
-            self._warned_cap = True  # backward Euler only dissipates: say it once when the cap lets a step gain energy
-            warn(f"implicit: CG stopped at its cap of {budget} iterations (relative residual {residual:.2g}) and the "
-                 f"step gained {rise:.3g} J; raise cg_max_iterations"
-                 + (' or set preconditioner = "multigrid"' if self.policy.current is self.policy.jacobi else ""))
-        self.last_residual = residual
-        self.stats["cg_iterations"] += its
-        self.stats["cg_unconverged_steps"] += min(unconverged, 1)
-        self.stats["line_search_cuts"] += int(self.cut[None])
+        self._finish(dt, o["cg_max_iterations"])
 
     @ti.kernel
     def _contact_friction(self, dt: ti.f64):
@@ -238,6 +252,10 @@ class Implicit(Integrator):
         NA = ti.static(len(self.ALPHAS))
         self.cut[None] = 0
         self.energy[NA + 1] = 0.0
+        self.system.live[None] = 1
+        self.pcg.spent[None] = 0
+        for j in ti.static(range(4)):
+            self.newton[j] = 0.0
         ti.loop_config(serialize=self.model.serial)
         for i in range(m.n_particles[None]):
             self.x0[i] = s.x[i]
@@ -264,7 +282,7 @@ class Implicit(Integrator):
         h = ti.cast(dt, m.fp)
         sy.mass_scale[None] = 1.0 + ti.cast(h_gamma, m.fp)
         ti.loop_config(serialize=self.model.serial)
-        for i in range(m.n_particles[None]):
+        for i in range(sy.gated(m.n_particles[None])):
             guess = ti.Vector.zero(m.fp, 3)
             if first != 0:  # the velocity change of the last step, the first iteration's initial guess
                 guess = self.dv_total[i]
@@ -277,10 +295,10 @@ class Implicit(Integrator):
             else:
                 self.dv[i] = ti.Vector.zero(m.fp, 3)
         ti.loop_config(serialize=self.model.serial)
-        for sp in range(m.n_springs[None]):
+        for sp in range(sy.gated(m.n_springs[None])):
             sy.set_spring(sp, s.x[m.spring_b[sp]] - s.x[m.spring_a[sp]], h)
         ti.loop_config(serialize=self.model.serial)
-        for i in range(m.n_particles[None]):
+        for i in range(sy.gated(m.n_particles[None])):
             b = ti.Vector.zero(m.fp, 3)
             if m.inv_mass[i] != 0:
                 kv = ti.Vector.zero(m.fp, 3)  # h^2 K v0 on the first iteration (K = -df/dx)
@@ -358,14 +376,18 @@ class Implicit(Integrator):
             self.energy[j] += 0.5 * k * stretch * stretch
 
     @ti.kernel
-    def _line_search(self, dt: ti.f64, search: ti.i32) -> ti.types.vector(5, ti.f64):
+    def _line_search(self, dt: ti.f64, search: ti.i32, k: ti.i32, newton_iterations: ti.i32, budget: ti.i32,
+                     cg_tolerance: ti.f64, newton_tolerance: ti.f64, converge: ti.i32):
         """dv_total += alpha dv, with alpha the longest of ALPHAS whose incremental potential IP satisfies the
         sufficient decrease (1 without the search; 1/8 when none does). The full step is evaluated first, the shorter
         ones only when it fails (in the same launch). IP and the total energy E (kinetic + spring + gravity) of every
         candidate are summed in float64 over the free particles and every spring, with the state still at the
-        iterate (its spring directions, its external forces), each candidate projected (_admissible). Returns (CG
-        iterations, the residual's measure r.z at CG's last look, b.z_b, the Newton decrement [J], the rise of E
-        above the step's start [J])."""
+        iterate (its spring directions, its external forces), each candidate projected (_admissible). Then
+        Newton iteration k (of newton_iterations) decides whether the step goes on (system.live): not when the
+        iterate has not gained energy on the step's start (backward Euler only dissipates; a global test, blind to
+        one particle speeding up: hence `converge`, which iterates to newton_tolerance), when the Newton decrement
+        fell below newton_tolerance of the first one, when the step's `budget` of CG iterations is spent, or at the
+        last iteration. A no-op once the step is done."""
         m, s, fm = self.model, self.state, self.forces
         A = ti.static(self.ALPHAS)
         NA = ti.static(len(self.ALPHAS))
@@ -380,7 +402,7 @@ class Implicit(Integrator):
         work = ti.cast(0.0, ti.f64)  # of the external forces over the step [J]
         # first the full step (j = 1, against j = 0); the shorter ones only where it does not decrease enough
         ti.loop_config(serialize=self.model.serial)
-        for i in range(m.n_particles[None]):
+        for i in range(self.system.gated(m.n_particles[None])):
             if m.inv_mass[i] != 0:
                 ext = ti.cast(fm.source_force(i, s.x[i], s.v[i]), ti.f64)
                 d = ti.cast(self.dv[i], ti.f64)
@@ -388,17 +410,17 @@ class Implicit(Integrator):
                 work += hh * ext.dot(ti.cast(self.v0[i] + self.dv_total[i], ti.f64) + d)
                 self._particle_potential(i, hh, gamma, ext, 0, 2)
         ti.loop_config(serialize=self.model.serial)
-        for sp in range(m.n_springs[None]):
+        for sp in range(self.system.gated(m.n_springs[None])):
             self._spring_potential(sp, hh, 0, 2)
         full = self.ip[1] <= self.ip[0] + self.ARMIJO * self.ip[NA + 1]
         shorter = ti.cast(search != 0, ti.i32) * (1 - ti.cast(full, ti.i32))
         ti.loop_config(serialize=self.model.serial)
-        for i in range(m.n_particles[None]):
+        for i in range(self.system.gated(m.n_particles[None])):
             if shorter != 0 and m.inv_mass[i] != 0:
                 ext = ti.cast(fm.source_force(i, s.x[i], s.v[i]), ti.f64)
                 self._particle_potential(i, hh, gamma, ext, 2, NA + 1)
         ti.loop_config(serialize=self.model.serial)
-        for sp in range(m.n_springs[None]):
+        for sp in range(self.system.gated(m.n_springs[None])):
             if shorter != 0:
                 self._spring_potential(sp, hh, 2, NA + 1)
         alpha = ti.cast(A[NA - 1], ti.f64)  # the shortest, when none decreases enough
@@ -411,7 +433,7 @@ class Implicit(Integrator):
         if search == 0 or full:
             alpha = 1.0
             energy = self.energy[1]
-        if alpha < 1.0:
+        if alpha < 1.0 and self.system.live[None] != 0:
             self.cut[None] += 1
         decrement = -self.ip[NA + 1]  # the Newton decrement dv^T A dv [J]
         # the rise of the total energy above the step's start, beyond the external forces' work and round-off (E is
@@ -421,7 +443,7 @@ class Implicit(Integrator):
         roundoff = ti.static(1e-6 if self.model.fp == ti.f32 else 1e-12)
         rise = energy - start - ti.max(work, 0.0) - roundoff * ti.abs(start)
         ti.loop_config(serialize=self.model.serial)
-        for i in range(m.n_particles[None]):
+        for i in range(self.system.gated(m.n_particles[None])):
             if m.inv_mass[i] != 0:
                 v0 = self.v0[i]
                 step = v0 + self.dv_total[i] + ti.cast(alpha, m.fp) * self.dv[i]
@@ -432,13 +454,47 @@ class Implicit(Integrator):
                         # held from here on: a further Newton iteration filters its normal (an active set), else
                         # it would ask for the same inward motion again and stall
                         self.contacts.released[i] = 0
+        if self.system.live[None] != 0:
+            self._decide(k, newton_iterations, budget, cg_tolerance, newton_tolerance, converge, decrement, rise)
+
+    @ti.func
+    def _decide(self, k, newton_iterations, budget, cg_tolerance, newton_tolerance, converge, decrement, rise):
+        """The host's old per-iteration bookkeeping, on the device: CG's iterations and residual into the step's
+        record and the tally, and whether another Newton iteration follows (see _line_search)."""
         cg = self.pcg
-        return ti.Vector([ti.cast(cg.iterations[None], ti.f64), cg.rz[None], cg.rz_b[None], decrement, rise], ti.f64)
+        cg.spent[None] += cg.iterations[None]
+        rz, rz_b = cg.rz[None], cg.rz_b[None]
+        residual = ti.cast(0.0, ti.f64)
+        if ti.math.isnan(rz) or ti.math.isinf(rz) or ti.math.isnan(rz_b) or ti.math.isinf(rz_b):
+            residual = ti.math.inf  # a preconditioner that returned NaN: CG stopped at once, the step is explicit
+            self.tally[_NONFINITE] += 1.0
+        elif rz_b > 0:
+            residual = ti.sqrt(ti.max(rz, 0.0) / rz_b)
+        if residual > cg_tolerance:
+            self.newton[3] = 1.0
+        self.tally[_NEWTON] += 1.0
+        if k == 0:
+            self.newton[0] = decrement
+        self.newton[1] = rise
+        self.newton[2] = residual
+        converged = decrement <= newton_tolerance * self.newton[0]
+        if (rise <= 0.0 and converge == 0) or converged or cg.spent[None] >= budget or k + 1 >= newton_iterations:
+            self.system.live[None] = 0
 
     @ti.kernel
-    def _finish(self, dt: ti.f64):
-        """v = v0 + dv_total, x = x0 + h v (pinned particles keep their start; the pins place the moving ones)."""
+    def _finish(self, dt: ti.f64, budget: ti.i32):
+        """v = v0 + dv_total, x = x0 + h v (pinned particles keep their start; the pins place the moving ones); the
+        step's record into the tally (a step that spent its `budget` of CG iterations and still gained energy is
+        kept for the warning), and the system live again for whatever solves next."""
         m, s = self.model, self.state
+        self.tally[_CG] += ti.cast(self.pcg.spent[None], ti.f64)
+        self.tally[_UNCONVERGED] += self.newton[3]
+        self.tally[_CUTS] += ti.cast(self.cut[None], ti.f64)
+        self.tally[_RESIDUAL] = self.newton[2]
+        if self.newton[1] > 0 and self.pcg.spent[None] >= budget:
+            self.tally[_CAPPED_RISE] = ti.max(self.tally[_CAPPED_RISE], self.newton[1])
+        self.system.live[None] = 1
+        self.pcg.spent[None] = 0
         h = ti.cast(dt, m.fp)
         ti.loop_config(serialize=self.model.serial)
         for i in range(m.n_particles[None]):

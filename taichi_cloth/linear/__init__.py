@@ -12,7 +12,9 @@ policy that picks one.
 
 A Preconditioner is built once at the model's capacity and, per system, `prepare(system, filt)`; then CG calls
 `apply(r, z)` (z = P r on (P,) vec3 fields) once per iteration, or, where `inline` is True, evaluates its Taichi
-function `precondition(i, r)` inside its own kernels. `warm_start` says whether CG may start from the last step's
+function `precondition(i, r)` inside its own kernels; where `in_thread` is True (every loop of its cycle serial),
+CG runs its Taichi function `cycle_in_thread(r, z)` inside CG's own one-thread kernel, so that a solve on the CPU is
+one launch. `warm_start` says whether CG may start from the last step's
 solution (the V-cycles start from 0, where r = b gives b.z_b for free); `detail` names it for the run summary.
 """
 from typing import Protocol
@@ -24,6 +26,7 @@ from .system import BlockSystem, ConstraintFilter
 
 class Preconditioner(Protocol):
     inline: bool
+    in_thread: bool
     warm_start: bool
     detail: str
 

@@ -59,7 +59,7 @@ from clothbase.fields import FieldBlock
 
 from ..cloth import SpringKind
 from ..model import csr
-from .dense import PIVOT_FLOOR, cholesky, cholesky_solve
+from .dense import PIVOT_FLOOR, cholesky, cholesky_solve, factor_in_parallel
 from .system import filtered_block, spring_block
 
 #: the most levels (the cloth itself included); a 256 x 256 sheet needs 5
@@ -248,6 +248,9 @@ class AggregationMultigrid:
         self.n_levels = blk.scalar(ti.i32, ())
         self.chol = blk.scalar(ti.f64, (C, C))    # the coarsest level's Cholesky factor (lower)
         self.work = blk.scalar(ti.f64, C)
+        if not self.serial:  # the parallel factor's diagonal, the inverse, the product (linear.dense)
+            self.pivots, self.inverse, self.solution = blk.scalar(ti.f64, C), blk.scalar(ti.f64, (C, C)), \
+                blk.scalar(ti.f64, C)
         self.weight = blk.scalar(fp, ())
         blk.finalize(self)
         self.weight[None] = float(omega)
@@ -375,7 +378,10 @@ class AggregationMultigrid:
             # makes a third level: a seam merge or a level switch compiles nothing
             self._prepare_coarse(system, len(self.sizes))
         self._coarse_compiled = True
-        self._factor()
+        self._factor(system)
+        if not self.serial:
+            unknowns = (3 if len(self.sizes) == 1 else 6) * self.sizes[-1]
+            factor_in_parallel(self.chol, self.pivots, self.inverse, unknowns, system.live)
 
     def apply(self, r, z) -> None:
         """z = V-cycle(r): r, z are (P,) vec3 fields of the cloth [kg m/s], [m/s]. Serial (the CPU): one launch, the
@@ -465,7 +471,7 @@ class AggregationMultigrid:
         n0, e0 = self.vbound[1], self.ebound[1]
         eps = ti.static(REGULARISATION)
         ti.loop_config(serialize=self.serial)
-        for g in range(self.vbound[l], self.vbound[l + 1]):
+        for g in range(self.vbound[l], ti.select(system.live[None] != 0, self.vbound[l + 1], self.vbound[l])):
             c = ti.Vector.zero(self.fp, 3)
             w = ti.cast(0.0, self.fp)
             for e in range(self.mem_ptr[g], self.mem_ptr[g + 1]):
@@ -480,7 +486,7 @@ class AggregationMultigrid:
             self.count[g - n0] = w
         hi = ti.select(l < nl, self.vbound[l], self.vbound[l - 1])  # the level above, when it has aggregates
         ti.loop_config(serialize=self.serial)
-        for i in range(self.vbound[l - 1], hi):
+        for i in range(self.vbound[l - 1], ti.select(system.live[None] != 0, hi, self.vbound[l - 1])):
             if ti.static(first):
                 self.arm[i] = ti.cast(system.x[i], self.fp) - self.centre[self.agg[i] - n0]
             else:
@@ -494,7 +500,7 @@ class AggregationMultigrid:
             for q in range(ea, self.ebound[l]):
                 self.gal[q - ea] = self._edge_galerkin(q, e0, first)
         ti.loop_config(serialize=self.serial)
-        for g in range(self.vbound[l], self.vbound[l + 1]):
+        for g in range(self.vbound[l], ti.select(system.live[None] != 0, self.vbound[l + 1], self.vbound[l])):
             D = ti.Matrix.zero(self.fp, 6, 6)
             for e in range(self.mem_ptr[g], self.mem_ptr[g + 1]):
                 m = self.mem[e]
@@ -510,7 +516,7 @@ class AggregationMultigrid:
             self.diag6[g - n0] = D
             self.dinv6[g - n0] = ti.cast(spd_inverse6(regularised(ti.cast(D, ti.f64), eps)), self.fp)
         ti.loop_config(serialize=self.serial)
-        for k in range(self.ebound[l], self.ebound[l + 1]):
+        for k in range(self.ebound[l], ti.select(system.live[None] != 0, self.ebound[l + 1], self.ebound[l])):
             O = ti.Matrix.zero(self.fp, 6, 6)
             for e in range(self.ce_ptr[k], self.ce_ptr[k + 1]):
                 X = self._galerkin_of(self.ce[e], ea, e0, first)
@@ -549,14 +555,14 @@ class AggregationMultigrid:
         n0, e0 = self.vbound[1], self.ebound[1]
         # the cloth: D_i = S_i (M' + sum B_s) S_i + M' (I - S_i), O_s = -S_a B_s S_b
         ti.loop_config(serialize=self.serial)
-        for i in range(n0):
+        for i in range(system.gated(n0)):
             S = filt.projector(i)
             D = filtered_block(S, system.diagonal(i, ms), system.model.mass[i] * ms)
             self.proj[i] = S
             self.diag[i] = D
             self.dinv[i] = D.inverse()
         ti.loop_config(serialize=self.serial)
-        for q in range(e0):
+        for q in range(system.gated(e0)):
             B = spring_block(system.u[q], system.axial[q], system.iso[q])
             self.off[q] = -(filt.projector(self.end_a[q]) @ B @ filt.projector(self.end_b[q]))
         # level 1 from the cloth (the deeper levels: _prepare_coarse, one launch each)
@@ -567,46 +573,49 @@ class AggregationMultigrid:
         self._coarse_level(system, l, False)
 
     @ti.kernel
-    def _factor(self):
+    def _factor(self, system: ti.template()):
         nl = self.n_levels[None]
         n0, e0 = self.vbound[1], self.ebound[1]
         eps = ti.static(REGULARISATION)
-        # the coarsest level: assembled densely (regularised as the module docstring says) and factored L L^T in one
-        # thread; 3 unknowns per vertex when it is the cloth itself, else 6
-        ti.loop_config(serialize=True)
-        for _ in range(1):
-            lc = nl - 1
-            v0, v1 = self.vbound[lc], self.vbound[lc + 1]
-            k = ti.select(lc == 0, 3, 6)
-            C = k * (v1 - v0)
-            for i in range(C):
-                for j in range(C):
-                    self.chol[i, j] = 0.0
+        # the coarsest level: assembled densely (regularised as the module docstring says), 3 unknowns per vertex
+        # when it is the cloth itself, else 6; factored L L^T in one thread on the CPU (elsewhere: prepare, by
+        # factor_in_parallel)
+        lc = nl - 1
+        v0, v1 = self.vbound[lc], self.vbound[lc + 1]
+        C = ti.select(lc == 0, 3, 6) * (v1 - v0)
+        ti.loop_config(serialize=self.serial)
+        for i, j in ti.ndrange(system.gated(C), C):
+            self.chol[i, j] = 0.0
+        ti.loop_config(serialize=self.serial)
+        for g in range(v0, ti.select(system.live[None] != 0, v1, v0)):
             if lc == 0:
-                for g in range(v0, v1):
-                    D = ti.cast(self.diag[g], ti.f64)
-                    for c, d in ti.static(ti.ndrange(3, 3)):
-                        self.chol[3 * g + c, 3 * g + d] = D[c, d]
-                for q in range(self.ebound[0], self.ebound[1]):
-                    O = ti.cast(self.off[q], ti.f64)
-                    a, b = self.end_a[q], self.end_b[q]
-                    for c, d in ti.static(ti.ndrange(3, 3)):
-                        self.chol[3 * a + c, 3 * b + d] = O[c, d]
-                        self.chol[3 * b + d, 3 * a + c] = O[c, d]
+                D = ti.cast(self.diag[g], ti.f64)
+                for c, d in ti.static(ti.ndrange(3, 3)):
+                    self.chol[3 * g + c, 3 * g + d] = D[c, d]
             else:
-                for g in range(v0, v1):
-                    D = regularised(ti.cast(self.diag6[g - n0], ti.f64), eps)
-                    for c in ti.static(range(6)):
-                        for d in ti.static(range(6)):
-                            self.chol[6 * (g - v0) + c, 6 * (g - v0) + d] = D[c, d]
-                for q in range(self.ebound[lc], self.ebound[lc + 1]):
-                    O = ti.cast(self.off6[q - e0], ti.f64)
-                    a, b = self.end_a[q] - v0, self.end_b[q] - v0
-                    for c in ti.static(range(6)):
-                        for d in ti.static(range(6)):
-                            self.chol[6 * a + c, 6 * b + d] = O[c, d]
-                            self.chol[6 * b + d, 6 * a + c] = O[c, d]
-            cholesky(self.chol, C)
+                D = regularised(ti.cast(self.diag6[g - n0], ti.f64), eps)
+                for c in ti.static(range(6)):
+                    for d in ti.static(range(6)):
+                        self.chol[6 * (g - v0) + c, 6 * (g - v0) + d] = D[c, d]
+        ti.loop_config(serialize=self.serial)
+        for q in range(self.ebound[lc], ti.select(system.live[None] != 0, self.ebound[lc + 1], self.ebound[lc])):
+            if lc == 0:
+                O = ti.cast(self.off[q], ti.f64)
+                a, b = self.end_a[q], self.end_b[q]
+                for c, d in ti.static(ti.ndrange(3, 3)):
+                    self.chol[3 * a + c, 3 * b + d] = O[c, d]
+                    self.chol[3 * b + d, 3 * a + c] = O[c, d]
+            else:
+                O = ti.cast(self.off6[q - e0], ti.f64)
+                a, b = self.end_a[q] - v0, self.end_b[q] - v0
+                for c in ti.static(range(6)):
+                    for d in ti.static(range(6)):
+                        self.chol[6 * a + c, 6 * b + d] = O[c, d]
+                        self.chol[6 * b + d, 6 * a + c] = O[c, d]
+        if ti.static(self.serial):
+            ti.loop_config(serialize=True)
+            for _ in range(system.gated(1)):
+                cholesky(self.chol, C)
 
     @ti.func
     def _descend_cloth(self, r: ti.template()):
@@ -718,14 +727,24 @@ class AggregationMultigrid:
         """The whole V-cycle in one thread and one launch, its levels a runtime loop (the CPU)."""
         ti.loop_config(serialize=True)
         for _ in range(1):
-            nl = self.n_levels[None]
-            self._descend_cloth(r)
-            for l in range(1, nl - 1):
-                self._descend(l)
-            self._solve_coarsest()
-            for k in range(1, nl - 1):
-                self._ascend(nl - 1 - k)
-            self._ascend_cloth(z)
+            self.cycle_in_thread(r, z)
+
+    @property
+    def in_thread(self) -> bool:
+        """Whether a CG iteration may run the cycle inside its own one-thread kernel (cycle_in_thread)."""
+        return self.serial
+
+    @ti.func
+    def cycle_in_thread(self, r: ti.template(), z: ti.template()):
+        """z = V-cycle(r), called from a loop that runs in one thread (serial only)."""
+        nl = self.n_levels[None]
+        self._descend_cloth(r)
+        for l in range(1, nl - 1):
+            self._descend(l)
+        self._solve_coarsest()
+        for k in range(1, nl - 1):
+            self._ascend(nl - 1 - k)
+        self._ascend_cloth(z)
 
     @ti.kernel
     def _descend_cloth_kernel(self, r: ti.template()):
@@ -737,9 +756,32 @@ class AggregationMultigrid:
 
     @ti.kernel
     def _solve_coarsest_kernel(self):
-        ti.loop_config(serialize=True)
-        for _ in range(1):
-            self._solve_coarsest()
+        """The coarsest level's solve without a one-thread loop (the parallel cycle): the product with the inverse
+        factor_in_parallel left, its rows in parallel."""
+        nl = self.n_levels[None]
+        n0 = self.vbound[1]
+        lc = nl - 1
+        v0, v1 = self.vbound[lc], self.vbound[lc + 1]
+        k = ti.select(lc == 0, 3, 6)
+        C = k * (v1 - v0)
+        for g in range(v0, v1):
+            if lc == 0:
+                for c in ti.static(range(3)):
+                    self.work[3 * g + c] = ti.cast(self.b[g][c], ti.f64)
+            else:
+                for c in ti.static(range(6)):
+                    self.work[6 * (g - v0) + c] = ti.cast(self.b6[g - n0][c], ti.f64)
+        for i in range(C):
+            acc = ti.cast(0.0, ti.f64)
+            for j in range(C):
+                acc += self.inverse[i, j] * self.work[j]
+            self.solution[i] = acc
+        for g in range(v0, v1):
+            if lc == 0:
+                self.x[g] = ti.Vector([self.solution[3 * g + c] for c in ti.static(range(3))], self.fp)
+            else:
+                q = 6 * (g - v0)
+                self.x6[g - n0] = ti.Vector([self.solution[q + c] for c in ti.static(range(6))], self.fp)
 
     @ti.kernel
     def _ascend_kernel(self, l: ti.i32):

@@ -1,5 +1,6 @@
-"""Dense Cholesky factorisation and solve in Taichi functions, for the coarsest level of a multigrid cycle (a few
-hundred unknowns, factored in one thread at every step; float64 fields)."""
+"""Dense Cholesky factorisation and solve, for the coarsest level of a multigrid cycle (a few hundred unknowns,
+factored at every Newton iteration; float64 fields): on the CPU in one thread (Taichi functions called from a
+one-thread loop), elsewhere column by column in parallel launches and solved by the inverse (factor_in_parallel)."""
 
 import taichi as ti
 
@@ -41,3 +42,55 @@ def cholesky_solve(L: ti.template(), y: ti.template(), C):
         for k in range(i + 1, C):
             t -= L[k, i] * y[k]
         y[i] = t / L[i, i]
+
+
+# ---------------------------------------------------------------------- the same without a one-thread loop
+# A GPU runs no loop in one thread (a one-thread factor of a 384-unknown level is some ten million dependent steps
+# of one GPU thread at every Newton iteration): there the factor takes one launch per column, its rows in parallel,
+# the inverse one launch, a column of it per thread, and a solve is the product with the inverse, its rows in
+# parallel.
+
+@ti.kernel
+def factor_column(A: ti.template(), diag: ti.template(), j: ti.i32, C: ti.i32, live: ti.template()):
+    """Column j of the Cholesky factor of A's leading C x C block, its rows in parallel; the columns before j are
+    done (earlier launches). The factor's diagonal goes to diag (A[j, j] stays A's: every row of the column reads
+    it), its lower triangle into A's. Nothing when live[None] is 0."""
+    for i in range(j, ti.select(live[None] != 0, C, j)):
+        s = A[j, j]
+        floor = ti.max(PIVOT_FLOOR * ti.abs(A[j, j]), 1e-300)
+        for k in range(j):
+            s -= A[j, k] * A[j, k]
+        djj = ti.sqrt(ti.max(s, floor))
+        if i == j:
+            diag[j] = djj
+        else:
+            t = A[i, j]
+            for k in range(j):
+                t -= A[i, k] * A[j, k]
+            A[i, j] = t / djj
+
+
+@ti.kernel
+def invert_factor(A: ti.template(), diag: ti.template(), inverse: ti.template(), C: ti.i32, live: ti.template()):
+    """inverse = (L L^T)^-1 for the factor of factor_column (lower triangle of A, diagonal diag), one column per
+    thread: two triangular solves with a unit vector. Nothing when live[None] is 0."""
+    for c in range(ti.select(live[None] != 0, C, 0)):
+        for i in range(C):
+            t = ti.cast(ti.select(i == c, 1.0, 0.0), ti.f64)
+            for k in range(c, i):
+                t -= A[i, k] * inverse[k, c]
+            inverse[i, c] = t / diag[i]
+        for ii in range(C):
+            i = C - 1 - ii
+            t = inverse[i, c]
+            for k in range(i + 1, C):
+                t -= A[k, i] * inverse[k, c]
+            inverse[i, c] = t / diag[i]
+
+
+def factor_in_parallel(A, diag, inverse, C: int, live) -> None:
+    """A's leading C x C block factored and inverted without a one-thread loop (C + 1 launches; live: a 0-d int
+    field, nothing is done while it is 0)."""
+    for j in range(C):
+        factor_column(A, diag, j, C, live)
+    invert_factor(A, diag, inverse, C, live)

@@ -14,6 +14,7 @@ class Jacobi:
     """inv_diag: (P,) 3x3 fields of the model's precision [1/kg], P its particle capacity."""
 
     inline = True
+    in_thread = False  # inline: nothing of its own to run in CG's thread
     #: CG may start from the last step's velocity change (Jacobi is slow to find its smooth part itself)
     warm_start = True
     detail = "block Jacobi"
@@ -41,7 +42,7 @@ class Jacobi:
         m = self.model
         ms = system.mass_scale[None]
         ti.loop_config(serialize=m.serial)
-        for i in range(m.n_particles[None]):
+        for i in range(system.gated(m.n_particles[None])):
             if m.inv_mass[i] != 0:
                 self.inv_diag[i] = filtered_block(filt.projector(i), system.diagonal(i, ms), m.mass[i] * ms).inverse()
 

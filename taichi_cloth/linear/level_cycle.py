@@ -35,7 +35,8 @@ from clothbase.fields import FieldBlock
 from multilevel.hierarchy import Level
 
 from ..model import csr
-from .dense import cholesky, cholesky_solve
+from ..runtime import one_thread_loops
+from .dense import cholesky, cholesky_solve, factor_in_parallel
 from .system import diagonal_block, filtered_block, spring_block, spring_coefficients, spring_row
 
 #: block-Jacobi weight; a scipy prototype measured 0.67 best among 0.5, 0.67 and 0.8 for V(1,1) cycles
@@ -78,6 +79,9 @@ class SpringMultigrid:
     fp:          ti.f32 or ti.f64, the precision of the fields and kernels (the coarse factor is float64)
     sweeps:      block-Jacobi sweeps before and after each coarse correction (fixed per solver)
     omega:       the Jacobi weight (a runtime attribute: changing it compiles nothing)
+    serial_below: levels with fewer vertices run their loops in one thread
+    one_thread_coarsest: the coarsest level factored and solved in one thread (default: on the CPU only; elsewhere
+                 by linear.dense.factor_in_parallel and its inverse)
     """
 
     #: applied by its own kernels between CG's (linear.pcg), from a zero start
@@ -85,7 +89,8 @@ class SpringMultigrid:
     warm_start = False
 
     def __init__(self, levels: list[Level], springs, stiffness, damping, rest_length, mass, fp=ti.f32,
-                 sweeps: int = 1, omega: float = DEFAULT_OMEGA, serial_below: int = SERIAL_BELOW, viscous=None):
+                 sweeps: int = 1, omega: float = DEFAULT_OMEGA, serial_below: int = SERIAL_BELOW, viscous=None,
+                 one_thread_coarsest: bool | None = None):
         L = len(levels)
         if viscous is None:
             viscous = [np.zeros(len(s)) for s in springs]
@@ -99,6 +104,7 @@ class SpringMultigrid:
             raise ValueError("need at least one smoothing sweep")
         self.fp, self.sweeps = fp, int(sweeps)
         self.serial_below = int(serial_below)
+        self.one_thread = one_thread_loops() if one_thread_coarsest is None else bool(one_thread_coarsest)
         self.n_levels = L
         self.sizes = [lv.n_vertices for lv in levels]
         self.spring_counts = [len(s) for s in springs]
@@ -173,6 +179,9 @@ class SpringMultigrid:
         self.r_w = blk.scalar(fp, max(len(rw), 1))
         self.chol = blk.scalar(ti.f64, (C, C))            # the coarsest level's Cholesky factor (lower)
         self.work = blk.scalar(ti.f64, C)
+        if not self.one_thread:  # the parallel factor's diagonal, the inverse, the product
+            self.pivots, self.inverse, self.solution = blk.scalar(ti.f64, C), blk.scalar(ti.f64, (C, C)), \
+                blk.scalar(ti.f64, C)
         self.mass_scale = blk.scalar(fp, ())              # 1 + h gamma of the current step
         self.level = blk.scalar(ti.i32, ())               # the active level
         self.weight = blk.scalar(fp, ())                  # omega
@@ -236,7 +245,9 @@ class SpringMultigrid:
         (linear.ConstraintFilter): a particle its contacts' static friction holds is fixed as a pin is, a sliding
         one's normal is left out on the simulated level (its smoother and its transfers work on the filtered system
         there). One kernel launch."""
-        self._prepare(system.x, filt, system.h, system.h_gamma, int(self.spring_offsets[self._active + 1]))
+        self._prepare(system, filt, system.h, system.h_gamma, int(self.spring_offsets[self._active + 1]))
+        if not self.one_thread:
+            factor_in_parallel(self.chol, self.pivots, self.inverse, 3 * self.sizes[0], system.live)
 
     def apply(self, r, z) -> None:
         """z = V-cycle(r) on the active level: r, z are (P,) vec3 fields of the simulated level [kg m/s], [m/s]
@@ -268,7 +279,7 @@ class SpringMultigrid:
 
     # ------------------------------------------------------------------ the kernels
     @ti.kernel
-    def _prepare(self, x: ti.template(), filt: ti.template(), h: ti.f64, h_gamma: ti.f64, n_springs: ti.i32):
+    def _prepare(self, system: ti.template(), filt: ti.template(), h: ti.f64, h_gamma: ti.f64, n_springs: ti.i32):
         L = ti.static(self.n_levels)
         hh = ti.cast(h, self.fp)
         mass_scale = 1.0 + ti.cast(h_gamma, self.fp)
@@ -277,18 +288,18 @@ class SpringMultigrid:
         # every vertex's particle on the simulated level: its own, then from the finest down, its copy's
         for l in ti.static(range(L)):
             ti.loop_config(serialize=ti.static(self.sizes[l] < self.serial_below))
-            for i in range(ti.select(l == active, ti.static(self.sizes[l]), 0)):
+            for i in range(system.gated(ti.select(l == active, ti.static(self.sizes[l]), 0))):
                 self.at[ti.static(int(self.offsets[l])) + i] = i
         for k in ti.static(range(L - 1)):
             l = ti.static(L - 2 - k)
             ti.loop_config(serialize=ti.static(self.sizes[l] < self.serial_below))
-            for i in range(ti.select(l < active, ti.static(self.sizes[l]), 0)):
+            for i in range(system.gated(ti.select(l < active, ti.static(self.sizes[l]), 0))):
                 g = ti.static(int(self.offsets[l])) + i
                 self.at[g] = self.at[self.up[g]]
         # the springs of every level up to the active one, at the positions of the simulated level
         ti.loop_config(serialize=ti.static(int(self.spring_offsets[-1]) < self.serial_below))
-        for q in range(n_springs):
-            d = ti.cast(x[self.at[self.end_b[q]]] - x[self.at[self.end_a[q]]], self.fp)
+        for q in range(system.gated(n_springs)):
+            d = ti.cast(system.x[self.at[self.end_b[q]]] - system.x[self.at[self.end_a[q]]], self.fp)
             u, axial, iso = spring_coefficients(d, hh, self.k[q], self.kd[q], self.c[q], self.rest[q])
             self.u[q] = u
             self.axial[q] = axial
@@ -296,7 +307,7 @@ class SpringMultigrid:
         # pins: the simulated level's own (inverse mass 0), then every coarser level inherits them
         for l in ti.static(range(L)):
             ti.loop_config(serialize=ti.static(self.sizes[l] < self.serial_below))
-            for i in range(self._count(l)):
+            for i in range(system.gated(self._count(l))):
                 g = ti.static(int(self.offsets[l])) + i
                 fixed = 0
                 nrm = ti.Vector.zero(self.fp, 3)
@@ -313,7 +324,7 @@ class SpringMultigrid:
         for k in ti.static(range(L - 1)):
             l = ti.static(L - 1 - k)  # from the finest down: level l marks the parents on level l - 1
             ti.loop_config(serialize=ti.static(self.sizes[l] < self.serial_below))
-            for i in range(self._count(l)):
+            for i in range(system.gated(self._count(l))):
                 g = ti.static(int(self.offsets[l])) + i
                 if self.pin[g] != 0:
                     for j in ti.static(range(3)):
@@ -323,7 +334,7 @@ class SpringMultigrid:
         # block inverses of every level
         for l in ti.static(range(L)):
             ti.loop_config(serialize=ti.static(self.sizes[l] < self.serial_below))
-            for i in range(self._count(l)):
+            for i in range(system.gated(self._count(l))):
                 g = ti.static(int(self.offsets[l])) + i
                 inv = ti.Matrix.zero(self.fp, 3, 3)
                 if self.pin[g] == 0:
@@ -332,33 +343,36 @@ class SpringMultigrid:
                     S = ti.Matrix.identity(self.fp, 3) - n.outer_product(n)
                     inv = filtered_block(S, self._block(g, mass_scale), self.mass[g] * mass_scale).inverse()
                 self.dinv[g] = inv
-        # the coarsest level's matrix (pinned rows: identity), factored L L^T in one thread
+        # the coarsest level's matrix (pinned rows: identity), each vertex its three rows; factored L L^T in one
+        # thread on the CPU (elsewhere: prepare, by factor_in_parallel)
         n0 = ti.static(self.sizes[0])
         C = ti.static(3 * self.sizes[0])
-        ti.loop_config(serialize=True)
-        for _ in range(1):
-            for i in range(C):
-                for j in range(C):
-                    self.chol[i, j] = 0.0
-            for v in range(n0):
-                if self.pin[v] != 0:
-                    for c in ti.static(range(3)):
-                        self.chol[3 * v + c, 3 * v + c] = 1.0
-                else:
-                    D = ti.cast(self._block(v, mass_scale), ti.f64)
-                    for c in ti.static(range(3)):
-                        for d in ti.static(range(3)):
-                            self.chol[3 * v + c, 3 * v + d] = D[c, d]
-                    for e in range(self.adj_ptr[v], self.adj_ptr[v + 1]):
-                        w = self.adj_other[e]
-                        if self.pin[w] == 0:
-                            q = self.adj_spring[e]
-                            B = spring_block(ti.cast(self.u[q], ti.f64), ti.cast(self.axial[q], ti.f64),
-                                             ti.cast(self.iso[q], ti.f64))
-                            for c in ti.static(range(3)):
-                                for d in ti.static(range(3)):
-                                    self.chol[3 * v + c, 3 * w + d] -= B[c, d]
-            cholesky(self.chol, C)
+        ti.loop_config(serialize=ti.static(self.one_thread))
+        for i, j in ti.ndrange(system.gated(C), C):
+            self.chol[i, j] = 0.0
+        ti.loop_config(serialize=ti.static(self.one_thread))
+        for v in range(system.gated(n0)):
+            if self.pin[v] != 0:
+                for c in ti.static(range(3)):
+                    self.chol[3 * v + c, 3 * v + c] = 1.0
+            else:
+                D = ti.cast(self._block(v, mass_scale), ti.f64)
+                for c in ti.static(range(3)):
+                    for d in ti.static(range(3)):
+                        self.chol[3 * v + c, 3 * v + d] = D[c, d]
+                for e in range(self.adj_ptr[v], self.adj_ptr[v + 1]):
+                    w = self.adj_other[e]
+                    if self.pin[w] == 0:
+                        q = self.adj_spring[e]
+                        B = spring_block(ti.cast(self.u[q], ti.f64), ti.cast(self.axial[q], ti.f64),
+                                         ti.cast(self.iso[q], ti.f64))
+                        for c in ti.static(range(3)):
+                            for d in ti.static(range(3)):
+                                self.chol[3 * v + c, 3 * w + d] -= B[c, d]
+        if ti.static(self.one_thread):
+            ti.loop_config(serialize=True)
+            for _ in range(system.gated(1)):
+                cholesky(self.chol, C)
 
     @ti.func
     def _residual(self, l: ti.template()):
@@ -390,8 +404,18 @@ class SpringMultigrid:
                     g = off + i
                     self.x[g] += w * (self.dinv[g] @ self.r[g])
 
+    @property
+    def in_thread(self) -> bool:
+        """Whether a CG iteration may run the cycle inside its own one-thread kernel (every loop serial)."""
+        return self.serial_below > max(max(self.sizes), int(self.spring_offsets[-1]))
+
     @ti.kernel
     def _cycle(self, r: ti.template(), z: ti.template()):
+        self.cycle_in_thread(r, z)
+
+    @ti.func
+    def cycle_in_thread(self, r: ti.template(), z: ti.template()):
+        """z = V-cycle(r) (the body of apply's one launch; callable from a one-thread loop when in_thread)."""
         L = ti.static(self.n_levels)
         active = self.level[None]
         # load the right-hand side on the active level, zero iterate
@@ -419,19 +443,35 @@ class SpringMultigrid:
                         acc += self.r_w[e] * self.r[self.r_child[e]]
                 self.b[gc] = acc
                 self.x[gc] = ti.Vector.zero(self.fp, 3)
-        # the coarsest level: x_0 = (L L^T)^-1 b_0, in one thread
+        # the coarsest level: x_0 = (L L^T)^-1 b_0, in one thread on the CPU, else as the product with the inverse
         n0 = ti.static(self.sizes[0])
         C = ti.static(3 * self.sizes[0])
-        ti.loop_config(serialize=True)
-        for _ in range(1):
+        if ti.static(self.one_thread):
+            ti.loop_config(serialize=True)
+            for _ in range(1):
+                for v in range(n0):
+                    for c in ti.static(range(3)):
+                        self.work[3 * v + c] = ti.cast(self.b[v][c], ti.f64)
+                cholesky_solve(self.chol, self.work, C)
+                for v in range(n0):
+                    out = ti.Vector.zero(self.fp, 3)
+                    if self.pin[v] == 0:
+                        out = ti.Vector([self.work[3 * v], self.work[3 * v + 1], self.work[3 * v + 2]], self.fp)
+                    self.x[v] = out
+        else:
             for v in range(n0):
                 for c in ti.static(range(3)):
                     self.work[3 * v + c] = ti.cast(self.b[v][c], ti.f64)
-            cholesky_solve(self.chol, self.work, C)
+            for i in range(C):
+                acc = ti.cast(0.0, ti.f64)
+                for j in range(C):
+                    acc += self.inverse[i, j] * self.work[j]
+                self.solution[i] = acc
             for v in range(n0):
                 out = ti.Vector.zero(self.fp, 3)
                 if self.pin[v] == 0:
-                    out = ti.Vector([self.work[3 * v], self.work[3 * v + 1], self.work[3 * v + 2]], self.fp)
+                    out = ti.Vector([self.solution[3 * v], self.solution[3 * v + 1], self.solution[3 * v + 2]],
+                                    self.fp)
                 self.x[v] = out
         # up: add the prolonged correction (not on pinned rows), smooth
         for l in ti.static(range(1, L)):

@@ -21,7 +21,8 @@ class PCG:
     b, x, r, z, p, q: (P,) vec3 fields of the model's precision: the right-hand side [kg m/s], the solution and
     start [m/s] (the caller writes both), the residual, the preconditioned residual, the direction and A p.
     The scalars, kept on the device: rz = r.z of the last look, rz_b = b.z_b, threshold = tolerance^2 rz_b and beta
-    (0-d float64 fields); active (1 while iterating), iterations and max_iterations (0-d int32 fields).
+    (0-d float64 fields); active (1 while iterating), iterations, max_iterations and spent (the iterations of the
+    step's earlier solves, which its cap counts: the implicit step keeps it) (0-d int32 fields).
     """
 
     #: CG iterations unrolled into one kernel launch with an inline preconditioner; iterations past convergence
@@ -34,13 +35,23 @@ class PCG:
         blk = FieldBlock()
         self.b, self.x, self.r, self.z, self.p, self.q = (blk.vector(3, fp, P) for _ in range(6))
         self.rz, self.rz_b, self.threshold, self.beta = (blk.scalar(ti.f64, ()) for _ in range(4))
-        self.active, self.iterations, self.max_iterations = (blk.scalar(ti.i32, ()) for _ in range(3))
+        self.active, self.iterations, self.max_iterations, self.spent = (blk.scalar(ti.i32, ()) for _ in range(4))
         blk.finalize(self)
 
     def solve(self, system, filt, preconditioner, tolerance: float, max_iterations: int) -> None:
         """x = the CG solution of S A S x = S b from the start in x, with `system` (linear.BlockSystem), `filt`
-        (linear.ConstraintFilter) and a prepared `preconditioner`; iterations, rz and rz_b stay on the device."""
+        (linear.ConstraintFilter) and a prepared `preconditioner`, in at most max_iterations less `spent` iterations
+        (none once system.live is 0: a Newton iteration past the step's end); iterations, rz and rz_b stay on the
+        device.
+
+        A model whose loops run in one thread (the CPU's small and medium cloths) takes the whole solve in one
+        launch, its iterations a device loop that ends at convergence, when the preconditioner can run there too
+        (`in_thread`: inline, or a cycle that is one thread's work). Otherwise a launch per chunk (inline) or per
+        iteration, and the host reads after each whether CG goes on."""
         tol2 = tolerance * tolerance
+        if self.model.serial and (preconditioner.inline or preconditioner.in_thread):
+            self._solve_in_thread(system, filt, preconditioner, tol2, max_iterations)
+            return
         self._start(system, filt, preconditioner, tol2, max_iterations)
         if preconditioner.inline:
             while self._iterate(system, filt, preconditioner, self.CHUNK, 0, tol2):
@@ -73,15 +84,38 @@ class PCG:
     @ti.kernel
     def _start(self, system: ti.template(), filt: ti.template(), pre: ti.template(), tol2: ti.f64,
                max_iterations: ti.i32):
+        self._start_pass(system, filt, pre, tol2, max_iterations)
+
+    @ti.kernel
+    def _solve_in_thread(self, system: ti.template(), filt: ti.template(), pre: ti.template(), tol2: ti.f64,
+                         max_iterations: ti.i32):
+        """The whole solve in one thread: the start, then iterations until CG stops (a preconditioner applied by
+        its cycle runs it in this thread before each)."""
+        ti.loop_config(serialize=True)
+        for _ in range(1):
+            self._start_pass(system, filt, pre, tol2, max_iterations)
+            first = 1
+            go = system.live[None]
+            while go != 0:
+                if ti.static(not pre.inline):
+                    pre.cycle_in_thread(self.r, self.z)
+                self._iteration(system, filt, pre, first, tol2)
+                first = 0
+                go = self.active[None]
+
+    @ti.func
+    def _start_pass(self, system: ti.template(), filt: ti.template(), pre: ti.template(), tol2, max_iterations):
         """r = S (b - A x); with an inline preconditioner also z, r.z, b.z_b and the first look."""
         m = self.model
+        cap = ti.select(system.live[None] != 0, max_iterations - self.spent[None], 0)
         self.iterations[None] = 0
         self.beta[None] = 0.0
-        self.max_iterations[None] = max_iterations
+        self.max_iterations[None] = cap
+        self.active[None] = 0
         rz = ti.cast(0.0, ti.f64)
         bz = ti.cast(0.0, ti.f64)
         ti.loop_config(serialize=m.serial)
-        for i in range(m.n_particles[None]):
+        for i in range(system.gated(m.n_particles[None])):
             zero = ti.Vector.zero(m.fp, 3)
             self.p[i] = zero
             self.r[i] = zero
@@ -98,55 +132,61 @@ class PCG:
             self.rz_b[None] = bz
             self.threshold[None] = tol2 * bz
             self.rz[None] = rz
-            self.active[None] = ti.select(rz > tol2 * bz and max_iterations > 0, 1, 0)
+            self.active[None] = ti.select(rz > tol2 * bz and cap > 0, 1, 0)
 
     @ti.kernel
     def _iterate(self, system: ti.template(), filt: ti.template(), pre: ti.template(), n: ti.template(),
                  first: ti.i32, tol2: ti.f64) -> ti.i32:
         """n CG iterations; a preconditioner applied by kernels wrote z = P(r) before (n = 1). Returns whether CG
         goes on (0: it had converged or reached its cap, and this call changed nothing)."""
-        m = self.model
         for _ in ti.static(range(n)):
-            if ti.static(not pre.inline):  # the look at the cycle's z
-                rz = ti.cast(0.0, ti.f64)
-                ti.loop_config(serialize=m.serial)
-                for i in range(m.n_particles[None]):
-                    z = filt.apply(i, self.z[i])
-                    self.z[i] = z
-                    rz += ti.cast(self.r[i].dot(z), ti.f64)
-                self._look(rz, first, tol2)
-            beta = ti.cast(self.beta[None], m.fp)
-            ti.loop_config(serialize=m.serial)
-            for i in range(m.n_particles[None]):
-                if m.inv_mass[i] != 0 and self.active[None] != 0:
-                    self.p[i] = self.z[i] + self.p[i] * beta
-            pq = ti.cast(0.0, ti.f64)
-            ti.loop_config(serialize=m.serial)
-            for i in range(m.n_particles[None]):
-                q = ti.Vector.zero(m.fp, 3)
-                if m.inv_mass[i] != 0 and self.active[None] != 0:
-                    q = system.product(i, self.p, filt)
-                self.q[i] = q
-                pq += ti.cast(self.p[i].dot(q), ti.f64)
-            alpha = ti.cast(0.0, ti.f64)
-            if self.active[None] != 0 and pq > 0:
-                alpha = self.rz[None] / pq
-            a = ti.cast(alpha, m.fp)
-            rz_new = ti.cast(0.0, ti.f64)
-            ti.loop_config(serialize=m.serial)
-            for i in range(m.n_particles[None]):
-                if m.inv_mass[i] != 0 and self.active[None] != 0:
-                    self.x[i] += a * self.p[i]
-                    r = self.r[i] - a * self.q[i]
-                    self.r[i] = r
-                    if ti.static(pre.inline):
-                        z = filt.apply(i, pre.precondition(i, r))
-                        self.z[i] = z
-                        rz_new += ti.cast(r.dot(z), ti.f64)
-            if self.active[None] != 0:
-                self.iterations[None] += 1
-                if pq <= 0:
-                    self.active[None] = 0
-            if ti.static(pre.inline):
-                self._look(rz_new, 0, tol2)
+            self._iteration(system, filt, pre, first, tol2)
         return self.active[None]
+
+    @ti.func
+    def _iteration(self, system: ti.template(), filt: ti.template(), pre: ti.template(), first, tol2):
+        """One CG iteration, a no-op once CG stopped (a preconditioner applied by its cycle wrote z = P(r) before:
+        its look comes first)."""
+        m = self.model
+        if ti.static(not pre.inline):  # the look at the cycle's z
+            rz = ti.cast(0.0, ti.f64)
+            ti.loop_config(serialize=m.serial)
+            for i in range(m.n_particles[None]):
+                z = filt.apply(i, self.z[i])
+                self.z[i] = z
+                rz += ti.cast(self.r[i].dot(z), ti.f64)
+            self._look(rz, first, tol2)
+        beta = ti.cast(self.beta[None], m.fp)
+        ti.loop_config(serialize=m.serial)
+        for i in range(m.n_particles[None]):
+            if m.inv_mass[i] != 0 and self.active[None] != 0:
+                self.p[i] = self.z[i] + self.p[i] * beta
+        pq = ti.cast(0.0, ti.f64)
+        ti.loop_config(serialize=m.serial)
+        for i in range(m.n_particles[None]):
+            q = ti.Vector.zero(m.fp, 3)
+            if m.inv_mass[i] != 0 and self.active[None] != 0:
+                q = system.product(i, self.p, filt)
+            self.q[i] = q
+            pq += ti.cast(self.p[i].dot(q), ti.f64)
+        alpha = ti.cast(0.0, ti.f64)
+        if self.active[None] != 0 and pq > 0:
+            alpha = self.rz[None] / pq
+        a = ti.cast(alpha, m.fp)
+        rz_new = ti.cast(0.0, ti.f64)
+        ti.loop_config(serialize=m.serial)
+        for i in range(m.n_particles[None]):
+            if m.inv_mass[i] != 0 and self.active[None] != 0:
+                self.x[i] += a * self.p[i]
+                r = self.r[i] - a * self.q[i]
+                self.r[i] = r
+                if ti.static(pre.inline):
+                    z = filt.apply(i, pre.precondition(i, r))
+                    self.z[i] = z
+                    rz_new += ti.cast(r.dot(z), ti.f64)
+        if self.active[None] != 0:
+            self.iterations[None] += 1
+            if pq <= 0:
+                self.active[None] = 0
+        if ti.static(pre.inline):
+            self._look(rz_new, 0, tol2)

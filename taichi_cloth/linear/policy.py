@@ -16,9 +16,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import taichi as ti
-
 from clothbase.errors import warn
+
+from ..runtime import one_thread_loops
 
 from .aggregation import AggregationMultigrid
 from .jacobi import Jacobi
@@ -105,7 +105,7 @@ class PreconditionerPolicy:
         try:
             if self.apart is None:
                 self.apart = AggregationMultigrid(self.model.capacity[:2], fp=self.model.fp,
-                                                  serial=ti.lang.impl.current_cfg().arch == ti.cpu)
+                                                  serial=one_thread_loops())
             self.apart.rebuild(self.model.data.springs, self.model.data.n_particles, self.model.data.kind)
             return self.apart
         except ValueError as err:
@@ -121,7 +121,7 @@ class PreconditionerPolicy:
             # every loop serial for a cloth the CPU runs serially; on a GPU none (the CPU's threshold would run
             # every loop in one GPU thread)
             serial_below=1 << 62 if self.model.serial else
-            (SERIAL_BELOW if ti.lang.impl.current_cfg().arch == ti.cpu else 0))
+            (SERIAL_BELOW if one_thread_loops() else 0))
 
     def topology_changed(self, level: int | None) -> None:
         """The model was refilled: on the 4-8 level `level`, or with none named on the level it was on when its

@@ -112,7 +112,9 @@ class BlockSystem:
     x:      the (P,) vec3 positions [m] the springs are evaluated at (the state's: the implicit step writes the
             iterate there)
     Fields, sized at the model's capacity: u (S,) vec3 unit directions, axial and iso (S,) [kg], mass_scale () = 1 +
-    h gamma. h [s] and h_gamma [-] of the current system are kept on the host for the V-cycles' own levels.
+    h gamma, live () int32: 1 while the step's Newton iterations go on (the implicit step decides on the device; the
+    kernels of an iteration past its end loop over nothing: `gated`). h [s] and h_gamma [-] of the current system
+    are kept on the host for the V-cycles' own levels.
     """
 
     def __init__(self, model, x):
@@ -124,13 +126,20 @@ class BlockSystem:
         self.axial = blk.scalar(fp, S)
         self.iso = blk.scalar(fp, S)
         self.mass_scale = blk.scalar(fp, ())
+        self.live = blk.scalar(ti.i32, ())
         blk.finalize(self)
+        self.live[None] = 1
         self.h = self.h_gamma = 0.0
 
     def set_step(self, h: float, gamma: float) -> None:
         """The step h [s] and air drag gamma [1/s] of the systems to come (host values; the kernels that assemble
         write mass_scale)."""
         self.h, self.h_gamma = float(h), float(h * gamma)
+
+    @ti.func
+    def gated(self, n):
+        """n while the step's Newton iterations go on, else 0: the range of a loop of an iteration's kernels."""
+        return ti.select(self.live[None] != 0, n, 0)
 
     @ti.func
     def set_spring(self, sp, d, h):
