@@ -9,6 +9,7 @@ import scipy.sparse.linalg as spl
 
 from conftest import damping_matrix, sliding_normals
 from taichi_cloth.linear.aggregation import AggregationMultigrid
+from taichi_cloth.runtime import OneThreadLoops
 from taichi_cloth.stability import stiffness_matrix
 from test_implicit_multigrid import GAMMA, H, assert_symmetric_positive, dense_level, prolongation, sewn_pair
 
@@ -110,7 +111,22 @@ def test_a_garment_solve_preconditioned_by_the_cycle_equals_the_direct_solve(pai
     got = integ.pcg.x.to_numpy()[:n].reshape(-1)
     np.testing.assert_allclose(got, expected, rtol=0, atol=1e-8 * np.abs(expected).max())
     assert 0 < its < 200, its
-    # the cycle as a GPU runs it (a kernel per level, the coarsest factored in parallel): tests/test_loop_policy.py
+    # the cycle as a GPU runs it (a kernel per level, no loop in one thread: the coarsest factored a column per
+    # launch and solved by its inverse) is the same operator as the CPU's one-thread cycle, to round-off
+    r = np.random.default_rng(5).standard_normal(integ.pcg.r.shape + (3,))
+    integ.pcg.r.from_numpy(r)
+    mg.apply(integ.pcg.r, integ.pcg.z)
+    serial = integ.pcg.z.to_numpy()[:n]
+    assert mg.serial and np.abs(serial).max() > 0
+    with OneThreadLoops() as seen:
+        gpu = AggregationMultigrid(integ.model.capacity[:2], fp=integ.model.fp, serial=False)
+        gpu.rebuild(integ.model.data.springs, n, integ.model.data.kind)
+        assert gpu.sizes == mg.sizes
+        gpu.prepare(integ.system, integ.filter)
+        integ.pcg.r.from_numpy(r)
+        gpu.apply(integ.pcg.r, integ.pcg.z)
+    assert seen.sites == set()
+    np.testing.assert_allclose(integ.pcg.z.to_numpy()[:n], serial, rtol=0, atol=1e-10 * np.abs(serial).max())
 
 
 def test_an_aggregation_v_cycle_is_symmetric_and_positive_and_its_levels_are_galerkin(pair):
@@ -173,11 +189,11 @@ MARGIN = 6
 
 def test_the_cg_count_stays_bounded_as_the_spacing_halves():
     """CG iterations per Newton iteration of the sewn pair falling onto the ball over 12 steps (cg_tolerance 1e-3,
-    float32 as the demos run) at 2, 1.4 and 1 cm spacing: the finest takes at most MARGIN more than the coarsest.
+    float32 as the demos run) at 2 and 1 cm spacing: the finer takes at most MARGIN more than the coarser.
     Jacobi-preconditioned CG on the same Newton systems (the 12th step's, its contacts off) needs more than MARGIN
     more (figures: docs/performance.md, preconditioners): the test tells a preconditioner that does not scale."""
     its, jacobi = {}, {}
-    for spacing in (0.02, 0.014, 0.01):
+    for spacing in (0.02, 0.01):
         sc = sewn_pair(spacing, precision="f32", cg_tolerance=1e-3)
         sc.step(12)
         integ = sc.integrator
@@ -196,7 +212,7 @@ def test_the_cg_count_stays_bounded_as_the_spacing_halves():
             counts.append(integ.pcg.iterations[None])
         assert isinstance(integ.policy.current, AggregationMultigrid) and counts[0] < counts[1], counts
         jacobi[spacing] = counts[1]
-    assert max(its[0.014], its[0.01]) <= its[0.02] + MARGIN, its
+    assert its[0.01] <= its[0.02] + MARGIN, its
     assert jacobi[0.01] > jacobi[0.02] + MARGIN, jacobi
 
 

@@ -16,7 +16,7 @@ import numpy as np
 from benchmarks.self_collision_stress import ribbon_pile
 
 #: frames per integrator family: the explicit step takes about 70 substeps per frame
-FRAMES = {"implicit": 45, "explicit": 10}
+FRAMES = {"implicit": 45, "explicit": 6}
 
 RUN = """
 import sys

@@ -1,6 +1,7 @@
 """The host reads the device once per frame in steady state: the measurement, which also carries what the
 controllers need (taichi_cloth.hostreads). Inside the steps, no read: CG, Newton, the stretch limit decide on the
-device. Each case runs a few frames to its steady state, then counts the reads of 4 frames exactly.
+device. Each case runs a few frames to its steady state, then counts the reads of 4 frames exactly. Every
+integrator, on a sphere and a mesh: tests/test_collision.py (drop_cloth).
 
 Not covered: self-collision (its continuous stage sorts the closing pairs and merges impact zones on the host) and
 loops that run in parallel (a cloth from 65,536 particles on the CPU for the implicit step, or on a GPU), whose CG
@@ -11,7 +12,6 @@ import pytest
 
 import taichi_cloth as tc
 from taichi_cloth.hostreads import HostReads
-from taichi_cloth.integrators import INTEGRATORS
 
 FRAMES = 4
 
@@ -33,25 +33,6 @@ def assert_one_read_per_frame(summary):
     assert summary.host_reads_frames == FRAMES, summary.format()
 
 
-@pytest.mark.parametrize("integrator", list(INTEGRATORS))
-def test_every_integrator_reads_once_per_frame(integrator):
-    dt = 1 / 120 if INTEGRATORS[integrator].unconditionally_stable else 2e-4
-    sc = tc.Scene(sheet(), integrator=integrator, dt=dt, pins=[{"indices": [0, 7]}],
-                  colliders=[{"type": "sphere", "center": [0, 0.7, 0], "radius": 0.2}])
-    assert_one_read_per_frame(steady_reads(sc))
-
-
-def test_the_implicit_step_reads_once_per_frame_with_its_multigrid_and_every_newton_iteration():
-    # newton_converge: several Newton iterations per step, each decided on the device; the aggregation multigrid's
-    # cycle inside CG's one launch (Jacobi's is the default of the case above)
-    sc = tc.Scene(sheet(), integrator="implicit", dt=1 / 60, pins=[{"indices": [0, 7]}],
-                  integrator_options={"preconditioner": "multigrid", "newton_converge": True,
-                                      "newton_tolerance": 1e-6})
-    summary = steady_reads(sc)
-    assert_one_read_per_frame(summary)
-    assert summary.stats["newton_iterations per step"] > 1.5  # more than one, as the options ask
-
-
 def test_the_4_8_multigrid_and_the_refiner_read_once_per_frame():
     cloth = tc.ClothBuilder.multilevel_grid((0.4, 0.4), (4, 4), 3, "cotton", center=(0.0, 1.0, 0.0), plane="xz")
     sc = tc.Scene(cloth, integrator="implicit", dt=1 / 120, pins=[{"near": [(-0.2, 1.0, -0.2), (0.2, 1.0, -0.2)]}],
@@ -60,15 +41,22 @@ def test_the_4_8_multigrid_and_the_refiner_read_once_per_frame():
     assert_one_read_per_frame(steady_reads(sc))
 
 
-def test_the_controllers_read_nothing_more():
+def test_the_implicit_step_and_the_controllers_read_nothing_more():
     """A moving pin, gusting wind, the stretch limit, a plane, a capsule and the adaptive step together (the
-    explicit family runs the same controllers' kernels)."""
+    explicit family runs the same controllers' kernels), on the implicit step with its aggregation multigrid (the
+    cycle inside CG's one launch; Jacobi's: the sewing case below) iterating Newton to a tight tolerance: several
+    Newton iterations per step, each decided on the device."""
     path = [[0.0, -0.2, 1.0, 0.0], [2.0, 0.2, 1.1, 0.0]]
     sc = tc.Scene(sheet(), integrator="implicit", dt="auto", pins=[{"indices": [0]}, {"indices": [7], "path": path}],
                   wind={"velocity": (0.0, 0.0, 2.0), "gust": 0.5}, stretch_limit={"max_strain": 0.1},
                   colliders=[{"type": "plane", "point": [0, 0.5, 0], "normal": [0, 1, 0]},
-                             {"type": "capsule", "a": [-0.2, 0.8, 0.1], "b": [0.2, 0.8, 0.1], "radius": 0.05}])
-    assert_one_read_per_frame(steady_reads(sc))
+                             {"type": "capsule", "a": [-0.2, 0.8, 0.1], "b": [0.2, 0.8, 0.1], "radius": 0.05}],
+                  integrator_options={"preconditioner": "multigrid", "newton_converge": True,
+                                      "newton_tolerance": 1e-6})
+    assert "aggregation" in sc.integrator.detail
+    summary = steady_reads(sc)
+    assert_one_read_per_frame(summary)
+    assert summary.stats["newton_iterations per step"] > 1.5  # more than one, as the options ask
 
 
 def test_sewing_reads_its_seam_gaps_with_the_measurement():
