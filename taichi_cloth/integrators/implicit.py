@@ -41,7 +41,7 @@ from ..runtime import PARALLEL_FROM_CPU_SOLVE
 from .base import Integrator, Option, at_least_one, one_of, positive
 
 #: the slots of Implicit.tally (Implicit.TALLY names them)
-_CG, _UNCONVERGED, _NEWTON, _CUTS, _RESIDUAL, _CAPPED_RISE, _NONFINITE = range(7)
+_CG, _UNCONVERGED, _NEWTON, _CUTS, _RESIDUAL, _CAPPED_RISE, _CAPPED_RESIDUAL, _NONFINITE = range(8)
 
 
 @ti.data_oriented
@@ -76,9 +76,10 @@ class Implicit(Integrator):
     ALPHAS = (1.0, 0.5, 0.25, 0.125)
     ARMIJO = 1e-4
     #: the device tally's slots: the four counters `stats` reports, the last step's relative residual, the largest
-    #: energy rise [J] of a step that spent its CG budget, and the solves that gave a non-finite value
+    #: energy rise [J] of a step that spent its CG budget and that step's residual, and the solves that gave a
+    #: non-finite value
     TALLY = ("cg_iterations", "cg_unconverged_steps", "newton_iterations", "line_search_cuts", "last_residual",
-             "capped_rise", "nonfinite_solves")
+             "capped_rise", "capped_residual", "nonfinite_solves")
 
     def __init__(self, model, state, forces, **options):
         super().__init__(model, state, forces, **options)
@@ -124,7 +125,7 @@ class Implicit(Integrator):
         if t["capped_rise"] > 0 and not self._warned_cap:
             self._warned_cap = True  # backward Euler only dissipates: say it once when the cap let a step gain energy
             warn(f"implicit: CG stopped at its cap of {self.options['cg_max_iterations']} iterations (relative "
-                 f"residual {t['last_residual']:.2g}) and the step gained {t['capped_rise']:.3g} J; raise "
+                 f"residual {t['capped_residual']:.2g}) and the step gained {t['capped_rise']:.3g} J; raise "
                  "cg_max_iterations" + (' or set preconditioner = "multigrid"'
                                         if self.policy.current is self.policy.jacobi else ""))
         if t["nonfinite_solves"] > 0 and not self._warned_nan:
@@ -491,8 +492,9 @@ class Implicit(Integrator):
         self.tally[_UNCONVERGED] += self.newton[3]
         self.tally[_CUTS] += ti.cast(self.cut[None], ti.f64)
         self.tally[_RESIDUAL] = self.newton[2]
-        if self.newton[1] > 0 and self.pcg.spent[None] >= budget:
-            self.tally[_CAPPED_RISE] = ti.max(self.tally[_CAPPED_RISE], self.newton[1])
+        if self.newton[1] > self.tally[_CAPPED_RISE] and self.pcg.spent[None] >= budget:
+            self.tally[_CAPPED_RISE] = self.newton[1]
+            self.tally[_CAPPED_RESIDUAL] = self.newton[2]
         self.system.live[None] = 1
         self.pcg.spent[None] = 0
         h = ti.cast(dt, m.fp)
