@@ -173,8 +173,8 @@ def assemble(cloth, *, name: str = "cloth", integrator: str = DEFAULT_INTEGRATOR
     weight = float(d.mass.sum()) * max(float(np.linalg.norm(forces.gravity_value)), 9.81)
     monitor = RestMonitor(rest_criterion, weight * float(np.linalg.norm(np.ptp(d.positions, axis=0))))
     diagnostics = Diagnostics(model, state, forces, rest_criterion.p99_speed, stepper.staggered_velocity)
-    for c in controllers:
-        if c.report_slots:
+    for c in (stepper, *controllers):  # the integrator too (planned CG reports its solves)
+        if getattr(c, "report_slots", 0):
             diagnostics.add_reporter(c)
     return SceneParts(name, model, state, forces, stepper, clock, controllers, contacts, collide,
                       wind_source.normals if wind_source is not None else None, parts_warnings,

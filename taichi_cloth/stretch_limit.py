@@ -19,8 +19,9 @@ body, the run summary reports (springs over the limit while no particle is insid
 The test is made on the device. A cloth whose loops run in one thread (the CPU's small and medium cloths) takes
 every pass of a step in one launch, a device loop that ends when the limit holds: no read. A parallel one runs
 CHUNK passes per launch, each only while the last left an excess above the tolerance, and the host reads one flag
-per launch (a step that converges in a few passes costs one launch and one read). The pass counters stay on the
-device until `stats` is read.
+per launch (a step that converges in a few passes costs one launch and one read); where no loop may run in one
+thread (a GPU), it launches the passes of a plan instead and reads nothing (`reported`). The pass counters stay on
+the device until `stats` is read.
 """
 import numpy as np
 import taichi as ti
@@ -29,6 +30,7 @@ from clothbase.fields import FieldBlock
 
 from .cloth import SpringKind
 from .control import Controller
+from .runtime import one_thread_loops
 
 
 @ti.data_oriented
@@ -61,13 +63,19 @@ class StretchLimit(Controller):
         self.limited = blk.scalar(ti.i32, max(model.capacity[1], 1))
         self.dx = blk.vector(3, model.fp, model.capacity[0])
         self.worst = blk.scalar(ti.f64, ())       # the largest excess strain of the last pass
-        self.counters = blk.scalar(ti.i32, 4)     # active, passes this step, passes in all, unconverged steps
+        # active, passes this step, passes in all, unconverged steps; since the last report (planned passes) the most
+        # passes of a step and the steps the plan stopped short
+        self.counters = blk.scalar(ti.i32, 6)
         blk.finalize(self)
+        #: where no loop may run in one thread (a GPU), a step launches the passes its plan allows and the host reads
+        #: nothing: the plan follows the last frame's largest step, read with its measurement (report)
+        self.planned = not one_thread_loops()
+        self._plan = self.iterations
         self.refresh()
 
     #: passes per launch
     CHUNK = 8
-    _ACTIVE, _PASSES, _TOTAL, _UNCONVERGED = range(4)
+    _ACTIVE, _PASSES, _TOTAL, _UNCONVERGED, _LARGEST, _SHORT = range(6)
 
     @property
     def stats(self) -> dict:
@@ -97,6 +105,11 @@ class StretchLimit(Controller):
         if self.model.serial:
             self._passes_in_thread(dt, self.max_strain, self.omega, self.tolerance, self.iterations)
             return
+        if self.planned:
+            for k in range(-(-self._plan // self.CHUNK)):
+                self._passes(dt, self.max_strain, self.omega, self.tolerance, self.iterations, int(k == 0))
+            self._end_planned()
+            return
         first = 1
         while first or self.counters[self._ACTIVE]:
             self._passes(dt, self.max_strain, self.omega, self.tolerance, self.iterations, first)
@@ -111,6 +124,37 @@ class StretchLimit(Controller):
             c[self._PASSES] = 0
         for _ in ti.static(range(self.CHUNK)):  # unrolled: every pass stays a top-level loop
             self._pass(dt, max_strain, omega, tolerance, iterations)
+
+    @ti.kernel
+    def _end_planned(self):
+        """A step whose plan ran out before the limit held: counted short and unconverged."""
+        c = ti.static(self.counters)
+        if c[self._ACTIVE] != 0:
+            c[self._ACTIVE] = 0
+            c[self._SHORT] += 1
+            c[self._UNCONVERGED] += 1
+        c[self._LARGEST] = ti.max(c[self._LARGEST], c[self._PASSES])
+
+    # ------------------------------------------------------------------ the plan (no loop in one thread)
+    @property
+    def report_slots(self) -> int:
+        return 2 if self.planned else 0
+
+    @ti.kernel
+    def report(self, out: ti.template(), offset: ti.i32):
+        c = ti.static(self.counters)
+        out[offset] = ti.cast(c[self._LARGEST], ti.f64)
+        out[offset + 1] = ti.cast(c[self._SHORT], ti.f64)
+        c[self._LARGEST] = 0
+        c[self._SHORT] = 0
+
+    def reported(self, values) -> None:
+        """The next steps' plan: twice the passes of the largest step since the last report and a chunk more, or twice
+        the plan when it stopped one short (never above `iterations`)."""
+        largest, short = int(values[0]), int(values[1])
+        if largest == 0 and short == 0:
+            return
+        self._plan = min(self.iterations, 2 * self._plan if short else 2 * largest + self.CHUNK)
 
     @ti.kernel
     def _passes_in_thread(self, dt: ti.f64, max_strain: ti.f64, omega: ti.f64, tolerance: ti.f64,

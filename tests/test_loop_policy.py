@@ -25,7 +25,8 @@ BALL = {"type": "sphere", "center": [0, 0.7, 0], "radius": 0.2}
 def levels_sheet():
     """A sheet on the implicit step's 4-8 multigrid, in float64 with CG to 1e-10, with a stretch limit, above a
     mesh collider."""
-    cloth = tc.ClothBuilder.multilevel_grid((0.4, 0.4), (2, 2), 3, "cotton", center=(0.0, 1.0, 0.0), plane="xz")
+    cloth = tc.ClothBuilder.multilevel_grid((0.4, 0.4), (4, 4), 3, "cotton", center=(0.0, 1.0, 0.0), plane="xz",
+                                            start_level=2)
     sc = tc.Scene(cloth, integrator="implicit", dt=1 / 60, pins=[{"near": [(-0.2, 1.0, -0.2), (0.2, 1.0, -0.2)]}],
                   precision="f64", multilevel={"refine": "none"}, colliders=[mesh_ball()],
                   stretch_limit={"max_strain": 0.1},
@@ -55,12 +56,14 @@ def test_under_the_gpu_policy_no_loop_runs_in_one_thread_and_the_multigrid_gives
     """The explicit steps, the implicit step's CG and Newton iterations, the 4-8 multigrid, the stretch limit and a
     mesh collider (the aggregation multigrid: tests/test_aggregation_rigid.py). The multigrid, its coarsest level
     factored in parallel and solved by its inverse, takes the same CG iterations to a tight tolerance and gives the
-    same positions to round-off, in float64."""
+    same positions to round-off, in float64. Neither policy reads the device inside a step: under the GPU's, CG
+    launches the iterations its plan (twice the last frame's largest solve, and a chunk) allows."""
     with OneThreadLoops() as seen:  # on the CPU: the whole solve and the stretch limit's passes, one launch each
         sc = levels_sheet()
-        sc.step(3)
+        summary = sc.run(4, progress=False, until_rest=False)
         x, its = sc.positions(), sc.integrator.stats["cg_iterations"]
     assert {"PCG._solve_in_thread", "StretchLimit._passes_in_thread"} <= seen.sites
+    assert summary.host_reads_steps == 0
     monkeypatch.setenv("TAICHI_CLOTH_GPU_LOOPS", "1")
     assert not one_thread_loops() and not serial_loops(100)
     with OneThreadLoops() as seen:
@@ -68,7 +71,22 @@ def test_under_the_gpu_policy_no_loop_runs_in_one_thread_and_the_multigrid_gives
         assert not sc.model.serial
         sc.step(2)
         sc = levels_sheet()
-        sc.step(3)
+        summary = sc.run(4, progress=False, until_rest=False)
+        assert sc.integrator.planned_cg and sc.integrator._plan < 500  # planned from frame 1's solves from then on
+        assert summary.host_reads_steps == 0 and summary.host_reads_frames == 3
+        assert sc.integrator.stats["cg_unconverged_steps"] == 0  # the plan was enough
         assert sc.integrator.stats["cg_iterations"] == its
         assert np.abs(sc.positions() - x).max() < 1e-10
     assert seen.sites == set()
+
+
+def test_a_cg_plan_too_short_is_counted_and_doubled(monkeypatch):
+    monkeypatch.setenv("TAICHI_CLOTH_GPU_LOOPS", "1")
+    sc = tc.Scene(sheet(), integrator="implicit", dt=1 / 60, pins=[{"indices": [0, 7]}],
+                  integrator_options={"preconditioner": "jacobi"})
+    sc.run(2, progress=False)
+    before = sc.integrator.stats["cg_unconverged_steps"]
+    sc.integrator._plan = 2  # Jacobi takes tens of iterations here
+    sc.run(1, progress=False)
+    assert sc.integrator.stats["cg_unconverged_steps"] > before  # stopped short of the tolerance, and counted so
+    assert sc.integrator._plan == 4  # twice the plan that ran out

@@ -37,11 +37,11 @@ from clothbase.errors import warn
 from clothbase.fields import FieldBlock
 
 from ..linear import PCG, PRECONDITIONERS, BlockSystem, ConstraintFilter, PreconditionerPolicy
-from ..runtime import PARALLEL_FROM_CPU_SOLVE
+from ..runtime import PARALLEL_FROM_CPU_SOLVE, one_thread_loops
 from .base import Integrator, Option, at_least_one, one_of, positive
 
 #: the slots of Implicit.tally (Implicit.TALLY names them)
-_CG, _UNCONVERGED, _NEWTON, _CUTS, _RESIDUAL, _CAPPED_RISE, _CAPPED_RESIDUAL, _NONFINITE = range(8)
+_CG, _UNCONVERGED, _NEWTON, _CUTS, _RESIDUAL, _CAPPED_RISE, _CAPPED_RESIDUAL, _NONFINITE, _LARGEST, _SHORT = range(10)
 
 
 @ti.data_oriented
@@ -76,10 +76,11 @@ class Implicit(Integrator):
     ALPHAS = (1.0, 0.5, 0.25, 0.125)
     ARMIJO = 1e-4
     #: the device tally's slots: the four counters `stats` reports, the last step's relative residual, the largest
-    #: energy rise [J] of a step that spent its CG budget and that step's residual, and the solves that gave a
-    #: non-finite value
+    #: energy rise [J] of a step that spent its CG budget and that step's residual, the solves that gave a
+    #: non-finite value, and since the last report (planned CG) the most iterations of one solve and the solves
+    #: that the plan stopped short
     TALLY = ("cg_iterations", "cg_unconverged_steps", "newton_iterations", "line_search_cuts", "last_residual",
-             "capped_rise", "capped_residual", "nonfinite_solves")
+             "capped_rise", "capped_residual", "nonfinite_solves", "largest_solve", "short_solves")
 
     def __init__(self, model, state, forces, **options):
         super().__init__(model, state, forces, **options)
@@ -102,6 +103,10 @@ class Implicit(Integrator):
         #: the counters of every step so far, kept on the device and read when `stats` is asked for (TALLY order)
         self.tally = blk.scalar(ti.f64, len(self.TALLY))
         blk.finalize(self)
+        #: where no loop may run in one thread (a GPU), CG launches a planned number of iterations and the host reads
+        #: nothing: the plan follows the largest solve of the last frame, read with its measurement (report)
+        self.planned_cg = not one_thread_loops()
+        self._plan = self.options["cg_max_iterations"]
         self._warned_cap = False
         self._warned_nan = False
         # Jacobi-PCG starts from the previous step's dv: it carries over the smooth part Jacobi is slow to find;
@@ -145,6 +150,29 @@ class Implicit(Integrator):
         """sqrt(r.Pr / b.Pb) at the end of the last step (inf after a non-finite solve); one device read."""
         return float(self.tally[self.TALLY.index("last_residual")])
 
+    # ------------------------------------------------------------------ the CG plan (no loop in one thread)
+    @property
+    def report_slots(self) -> int:
+        """Planned CG reports its largest solve and its short solves with every measurement (Controller protocol)."""
+        return 2 if self.planned_cg else 0
+
+    @ti.kernel
+    def report(self, out: ti.template(), offset: ti.i32):
+        out[offset] = self.tally[_LARGEST]
+        out[offset + 1] = self.tally[_SHORT]
+        self.tally[_LARGEST] = 0.0
+        self.tally[_SHORT] = 0.0
+
+    def reported(self, values) -> None:
+        """The next solves' plan: twice the largest solve since the last report and a chunk more (a drape's solves
+        grow from frame to frame as it falls and lands), or twice the plan when the plan stopped one short (never above
+        cg_max_iterations). Iterations past convergence are no-ops, but a multigrid's cycle still runs in them."""
+        largest, short = int(values[0]), int(values[1])
+        if largest == 0 and short == 0:
+            return  # no solve since the last report
+        cap = self.options["cg_max_iterations"]
+        self._plan = min(cap, 2 * self._plan if short else 2 * largest + self.pcg.CHUNK)
+
     # ------------------------------------------------------------------ the preconditioner
     @property
     def needs_levels(self) -> bool:
@@ -175,8 +203,8 @@ class Implicit(Integrator):
     def _advance(self, dt: float) -> None:
         """The step's Newton iterations, decided on the device: each launches its kernels, and once an iteration
         decided that the step is done (the line search's end) the later ones loop over nothing (system.live 0).
-        Where CG reads the device anyway (its parallel chunks), the host reads that decision too and stops
-        launching."""
+        Where CG reads the device anyway (its parallel chunks on the CPU), the host reads that decision too and
+        stops launching."""
         o = self.options
         self.system.set_step(dt, self.forces.air_damping_value)
         if self.has_contacts:
@@ -187,11 +215,12 @@ class Implicit(Integrator):
             self._assemble(dt, self.system.h_gamma, int(k == 0))
             preconditioner = self.policy.current
             preconditioner.prepare(self.system, self.filter)
-            self.pcg.solve(self.system, self.filter, preconditioner, o["cg_tolerance"], o["cg_max_iterations"])
+            self.pcg.solve(self.system, self.filter, preconditioner, o["cg_tolerance"], o["cg_max_iterations"],
+                           self._plan if self.planned_cg else None)
             self._line_search(dt, int(o["line_search"]), k, n, o["cg_max_iterations"], o["cg_tolerance"],
                               o["newton_tolerance"], int(o["newton_converge"]))
             in_thread = self.model.serial and (preconditioner.inline or preconditioner.in_thread)
-            if not in_thread and k + 1 < n and self.system.live[None] == 0:
+            if not (in_thread or self.planned_cg) and k + 1 < n and self.system.live[None] == 0:
                 break
         self._finish(dt, o["cg_max_iterations"])
 
@@ -464,6 +493,9 @@ class Implicit(Integrator):
         record and the tally, and whether another Newton iteration follows (see _line_search)."""
         cg = self.pcg
         cg.spent[None] += cg.iterations[None]
+        self.tally[_LARGEST] = ti.max(self.tally[_LARGEST], ti.cast(cg.iterations[None], ti.f64))
+        if cg.active[None] != 0:  # planned CG: stopped by the plan, short of its tolerance and its cap
+            self.tally[_SHORT] += 1.0
         rz, rz_b = cg.rz[None], cg.rz_b[None]
         residual = ti.cast(0.0, ti.f64)
         if ti.math.isnan(rz) or ti.math.isinf(rz) or ti.math.isnan(rz_b) or ti.math.isinf(rz_b):

@@ -38,7 +38,8 @@ class PCG:
         self.active, self.iterations, self.max_iterations, self.spent = (blk.scalar(ti.i32, ()) for _ in range(4))
         blk.finalize(self)
 
-    def solve(self, system, filt, preconditioner, tolerance: float, max_iterations: int) -> None:
+    def solve(self, system, filt, preconditioner, tolerance: float, max_iterations: int,
+              planned: int | None = None) -> None:
         """x = the CG solution of S A S x = S b from the start in x, with `system` (linear.BlockSystem), `filt`
         (linear.ConstraintFilter) and a prepared `preconditioner`, in at most max_iterations less `spent` iterations
         (none once system.live is 0: a Newton iteration past the step's end); iterations, rz and rz_b stay on the
@@ -47,12 +48,23 @@ class PCG:
         A model whose loops run in one thread (the CPU's small and medium cloths) takes the whole solve in one
         launch, its iterations a device loop that ends at convergence, when the preconditioner can run there too
         (`in_thread`: inline, or a cycle that is one thread's work). Otherwise a launch per chunk (inline) or per
-        iteration, and the host reads after each whether CG goes on."""
+        iteration: with `planned`, that many iterations are launched and the host reads nothing (those past
+        convergence are no-ops; a solve that needs more stops there with `active` still 1: the caller counts it);
+        without, the host reads after each launch whether CG goes on."""
         tol2 = tolerance * tolerance
         if self.model.serial and (preconditioner.inline or preconditioner.in_thread):
             self._solve_in_thread(system, filt, preconditioner, tol2, max_iterations)
             return
         self._start(system, filt, preconditioner, tol2, max_iterations)
+        if planned is not None:
+            if preconditioner.inline:
+                for _ in range(-(-planned // self.CHUNK)):
+                    self._iterate_quietly(system, filt, preconditioner, self.CHUNK, 0, tol2)
+                return
+            for k in range(planned):
+                preconditioner.apply(self.r, self.z)
+                self._iterate_quietly(system, filt, preconditioner, 1, int(k == 0), tol2)
+            return
         if preconditioner.inline:
             while self._iterate(system, filt, preconditioner, self.CHUNK, 0, tol2):
                 pass
@@ -142,6 +154,13 @@ class PCG:
         for _ in ti.static(range(n)):
             self._iteration(system, filt, pre, first, tol2)
         return self.active[None]
+
+    @ti.kernel
+    def _iterate_quietly(self, system: ti.template(), filt: ti.template(), pre: ti.template(), n: ti.template(),
+                         first: ti.i32, tol2: ti.f64):
+        """_iterate, returning nothing: the host does not wait for it."""
+        for _ in ti.static(range(n)):
+            self._iteration(system, filt, pre, first, tol2)
 
     @ti.func
     def _iteration(self, system: ti.template(), filt: ti.template(), pre: ti.template(), first, tol2):
