@@ -1,6 +1,7 @@
 """Preconditioned conjugate gradients on the filtered block system (Baraff and Witkin 1998's modified PCG): solves
-S A S x = S b for x in range(S). The convergence test is decided on the device: the host reads only whether CG
-goes on, once per launch.
+S A S x = S b for x in range(S). The convergence test is decided on the device. The whole solve is one launch
+where the loops run in one thread (the CPU); elsewhere a planned number of iterations is launched with no read (a
+GPU), or the host reads after each launch whether CG goes on (the CPU's parallel cloths): see `solve`.
 
 The preconditioner is either inline (`inline = True`: a Taichi function `precondition(i, r)` evaluated inside the
 CG kernels, CHUNK iterations unrolled per launch) or applied by its own kernels (`apply(r, z)` once per iteration,
