@@ -119,6 +119,16 @@ def one_thread_loops() -> bool:
     return impl.current_cfg().arch == ti.cpu and os.environ.get("TAICHI_CLOTH_GPU_LOOPS", "0") in ("", "0")
 
 
+def next_plan(plan: int, largest: int, short: int, chunk: int, cap: int) -> int:
+    """The iterations (or passes) to launch per solve from the next frame on, where no loop runs in one thread and
+    the host reads nothing inside a step: twice the `largest` solve since the last frame and a `chunk` more (a
+    drape's solves grow from frame to frame as it falls and lands), or twice the `plan` when it stopped `short`
+    solves before their end; at most `cap`. An unchanged plan when nothing was solved since (largest = short = 0)."""
+    if largest == 0 and short == 0:
+        return plan
+    return min(cap, 2 * plan if short else 2 * largest + chunk)
+
+
 def serial_loops(n_particles: int, default: int = PARALLEL_FROM_CPU) -> bool:
     """Whether a cloth of n_particles should run its kernels' loops in one thread: where one_thread_loops() allows
     it (the CPU), below `default` particles (the integrator's parallel_from_cpu), or below the count

@@ -30,7 +30,7 @@ from clothbase.fields import FieldBlock
 
 from .cloth import SpringKind
 from .control import Controller
-from .runtime import one_thread_loops
+from .runtime import next_plan, one_thread_loops
 
 
 @ti.data_oriented
@@ -149,12 +149,8 @@ class StretchLimit(Controller):
         c[self._SHORT] = 0
 
     def reported(self, values) -> None:
-        """The next steps' plan: twice the passes of the largest step since the last report and a chunk more, or twice
-        the plan when it stopped one short (never above `iterations`)."""
-        largest, short = int(values[0]), int(values[1])
-        if largest == 0 and short == 0:
-            return
-        self._plan = min(self.iterations, 2 * self._plan if short else 2 * largest + self.CHUNK)
+        """The next steps' plan of passes (runtime.next_plan)."""
+        self._plan = next_plan(self._plan, int(values[0]), int(values[1]), self.CHUNK, self.iterations)
 
     @ti.kernel
     def _passes_in_thread(self, dt: ti.f64, max_strain: ti.f64, omega: ti.f64, tolerance: ti.f64,

@@ -37,7 +37,7 @@ from clothbase.errors import warn
 from clothbase.fields import FieldBlock
 
 from ..linear import PCG, PRECONDITIONERS, BlockSystem, ConstraintFilter, PreconditionerPolicy
-from ..runtime import PARALLEL_FROM_CPU_SOLVE, one_thread_loops
+from ..runtime import PARALLEL_FROM_CPU_SOLVE, next_plan, one_thread_loops
 from .base import Integrator, Option, at_least_one, one_of, positive
 
 #: the slots of Implicit.tally (Implicit.TALLY names them)
@@ -164,14 +164,10 @@ class Implicit(Integrator):
         self.tally[_SHORT] = 0.0
 
     def reported(self, values) -> None:
-        """The next solves' plan: twice the largest solve since the last report and a chunk more (a drape's solves
-        grow from frame to frame as it falls and lands), or twice the plan when the plan stopped one short (never above
-        cg_max_iterations). Iterations past convergence are no-ops, but a multigrid's cycle still runs in them."""
-        largest, short = int(values[0]), int(values[1])
-        if largest == 0 and short == 0:
-            return  # no solve since the last report
-        cap = self.options["cg_max_iterations"]
-        self._plan = min(cap, 2 * self._plan if short else 2 * largest + self.pcg.CHUNK)
+        """The next solves' plan (runtime.next_plan; iterations past convergence are no-ops, but a multigrid's cycle
+        still runs in them)."""
+        self._plan = next_plan(self._plan, int(values[0]), int(values[1]), self.pcg.CHUNK,
+                               self.options["cg_max_iterations"])
 
     # ------------------------------------------------------------------ the preconditioner
     @property
