@@ -5,8 +5,9 @@
 on the CPU a parallel loop costs more to dispatch than a small pass costs to run, so below a particle count serial
 loops are faster. Where that count lies depends on the integrator: the explicit family runs a frame in a few fused
 launches that do real work per particle (PARALLEL_FROM_CPU, 4096), while a solve launches several short loops per
-CG iteration, bound by memory, and on the 2-core CPU gained nothing from the second core up to 66k particles
-(PARALLEL_FROM_CPU_SOLVE, 65536; each integrator names its own as `parallel_from_cpu`). `init(...,
+CG iteration, bound by memory, and on the 2-core CPU gained nothing from the second core at any size measured (up
+to 66k particles), so a solve runs in one thread by default (PARALLEL_FROM_CPU_SOLVE: never; each integrator names
+its own count as `parallel_from_cpu`). `init(...,
 parallel_from=n)` or the environment variable TAICHI_CLOTH_PARALLEL_FROM sets one count for every integrator. The
 measurements behind both: docs/performance.md, "Why the defaults are what they are". A GPU runs every loop in
 parallel.
@@ -35,8 +36,9 @@ _current_arch: str | None = None
 _saves_cache_at_exit = False
 #: particles from which the CPU runs a cloth's loops in parallel (see the module docstring): the explicit family's
 PARALLEL_FROM_CPU = 4096
-#: ... and the implicit solves' (their CG iterations launch many short loops)
-PARALLEL_FROM_CPU_SOLVE = 65536
+#: ... and the implicit solves': never (their CG iterations launch many short loops, bound by memory; one thread was
+#: as fast at every size measured, and a solve's sums then run in a fixed order: reproducible runs)
+PARALLEL_FROM_CPU_SOLVE = 1 << 62
 _parallel_from: int | None = None
 
 

@@ -4,8 +4,8 @@ device. Each case runs a few frames to its steady state, then counts the reads o
 integrator, on a sphere and a mesh: tests/test_collision.py (drop_cloth).
 
 Not covered: self-collision (its continuous stage sorts the closing pairs and merges impact zones on the host) and
-loops that run in parallel (a cloth from 65,536 particles on the CPU for the implicit step, or on a GPU), whose CG
-reads once per chunk of iterations: docs/performance.md, "Host reads".
+an implicit step forced parallel on the CPU (TAICHI_CLOTH_PARALLEL_FROM), whose CG reads once per chunk of
+iterations: docs/performance.md, "Host reads". The GPU's policy: tests/test_loop_policy.py.
 """
 import numpy as np
 import pytest

@@ -22,7 +22,7 @@ def test_a_stale_kernel_cache_lock_is_removed_and_a_fresh_one_kept(tmp_path):
 
 @pytest.mark.parametrize("integrator, serial", [("explicit", False), ("implicit", True), ("approx-implicit", True)])
 def test_a_solve_runs_its_loops_in_one_thread_where_a_fused_explicit_step_does_not(integrator, serial, monkeypatch):
-    """4,900 particles, between the explicit family's count (4,096) and the solves' (65,536): a solve's loops run in
+    """4,900 particles, above the explicit family's count (4,096; the solves' is "never"): a solve's loops run in
     one thread on the CPU, the explicit step's in parallel; TAICHI_CLOTH_PARALLEL_FROM sets one count for all.
     Building the scene compiles nothing."""
     import taichi_cloth as tc
