@@ -51,7 +51,7 @@ def test_on_the_cpu_a_small_cloth_runs_its_loops_in_one_thread():
         fused_sheet().step(2)
     assert seen.sites == {"FusedSteps._serial_steps", "Diagnostics._measure"}  # a frame's steps in one launch
     with OneThreadLoops() as seen:
-        sc = tc.Scene(sheet(64), integrator="explicit", dt=1e-4)
+        sc = tc.Scene(sheet(64), integrator="explicit", dt=2e-5)
         assert not sc.model.serial  # 4,096 particles: the explicit steps run in parallel
         sc.step(1)
     assert seen.sites == {"Diagnostics._measure"}  # the frame's sums still in one thread, in a fixed order
