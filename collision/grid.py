@@ -7,6 +7,11 @@ fields (no reallocation, no recompile) while the mesh stays within the allocated
 (Teschner et al. 2003: hash(i,j,k) = (73856093 i ^ 19349663 j ^ 83492791 k) mod a prime) has no bounds, for a
 mesh that travels (the cloth itself, for self-collision); cells sharing a bucket only add candidates. With
 `vertices_start` the boxes span each triangle's start and end positions (swept over a step).
+
+`build` rebuilds from the host and checks the capacity at once (one read). A grid rebuilt on the device without a
+read (self-collision: `build_pass` inside a kernel, or the `rebuild` launches) follows its 0-d `active` flag (0: its
+loops run over nothing) and keeps in `needed` the most (triangle, cell) pairs a rebuild asked for; pairs beyond the
+capacity are dropped, and its owner reports `needed` with the frame's measurement (`check_capacity`).
 """
 import math
 
@@ -59,7 +64,11 @@ class VoxelGrid:
         self.cell_start = blk.scalar(ti.i32, n_cells + 1)
         self.block_count = blk.scalar(ti.i32, -(-n_cells // SCAN_BLOCK))  # cells of each scan block (parallel scan)
         self.cell_triangles = blk.scalar(ti.i32, self.pair_capacity)
+        self.active = blk.scalar(ti.i32, ())  # 0: a rebuild on the device does nothing (the mesh did not move enough)
+        self.total = blk.scalar(ti.i32, ())  # the (triangle, cell) pairs of the last rebuild
+        self.needed = blk.scalar(ti.i32, ())  # the most pairs a rebuild asked for since check_capacity
         blk.finalize(self)
+        self.active[None] = 1
         self.n_pairs = 0
         self.build(vertices_np)
 
@@ -87,16 +96,37 @@ class VoxelGrid:
             if np.any(v.max(0) - v.min(0) + 2 * self.margin > extent - 2 * self.cell_size):
                 raise ValueError("the mesh outgrew its voxel grid; build the collider again with a larger margin")
             self.origin[None] = (centre - 0.5 * extent).tolist()
+        self.rebuild()
+        total = int(self.total[None])
+        self.check_capacity(total)
+        self.n_pairs = total
+        return total
+
+    def rebuild(self) -> None:
+        """Bin every triangle again where `active` is set, with no read (the capacity: check_capacity)."""
         self._count()
-        total = self._scan()
-        if total > self.pair_capacity:
-            raise ValueError(f"voxel grid needs {total} triangle-cell pairs, capacity {self.pair_capacity}: "
-                             "build the collider again (or use a larger cell size)")
+        self._scan()
         self._fill()
         if not self.serial:
             self._sort_cells()
-        self.n_pairs = total
-        return total
+
+    def check_capacity(self, needed: int) -> None:
+        """Raise if a rebuild asked for more (triangle, cell) pairs than the grid holds."""
+        if needed > self.pair_capacity:
+            raise ValueError(f"voxel grid needs {needed} triangle-cell pairs, capacity {self.pair_capacity}: "
+                             "build the collider again (or use a larger cell size)")
+
+    @ti.func
+    def gate(self, n):
+        """n while a rebuild is on (active), else 0: the range of the rebuild's loops."""
+        return ti.select(self.active[None] != 0, n, 0)
+
+    @ti.func
+    def build_pass(self):
+        """The whole rebuild (count, prefix sum, fill) inside a kernel; in a loop in one thread on a serial grid."""
+        self.count_pass()
+        self.scan_pass()
+        self.fill_pass()
 
     @ti.func
     def cell_coord(self, p):
@@ -137,68 +167,85 @@ class VoxelGrid:
 
     @ti.kernel
     def _count(self):
+        self.count_pass()
+
+    @ti.func
+    def count_pass(self):
         ti.loop_config(serialize=self.serial)
-        for c in range(self.n_cells):
+        for c in range(self.gate(self.n_cells)):
             self.cell_count[c] = 0
         ti.loop_config(serialize=self.serial)
-        for t in range(self.n_triangles[None]):
+        for t in range(self.gate(self.n_triangles[None])):
             lo, hi = self.triangle_box(t)
             cmin, cmax = self.clamp_range(lo, hi)
             for i, j, k in ti.ndrange((cmin[0], cmax[0] + 1), (cmin[1], cmax[1] + 1), (cmin[2], cmax[2] + 1)):
                 ti.atomic_add(self.cell_count[self.cell_index(ti.Vector([i, j, k]))], 1)
 
     @ti.kernel
-    def _scan(self) -> ti.i32:
-        """cell_start = the exclusive prefix sum of cell_count; returns the total. Serial: one thread, ~1e5
-        additions once per build. Parallel (no loop in one thread: a GPU): each block of SCAN_BLOCK cells sums
-        itself, then starts after the sum of the blocks before it (each block adds those up itself: a few hundred
-        additions each) and scans its own cells."""
-        total = 0
+    def _scan(self):
+        self.scan_pass()
+
+    @ti.func
+    def scan_pass(self):
+        """cell_start = the exclusive prefix sum of cell_count (clipped to the capacity); total its sum (and needed
+        the largest). Serial: one
+        thread, ~1e5 additions once per build. Parallel (no loop in one thread: a GPU): each block of SCAN_BLOCK
+        cells sums itself, then starts after the sum of the blocks before it (each block adds those up itself: a
+        few hundred additions each) and scans its own cells."""
         if ti.static(self.serial):
+            total = 0
             ti.loop_config(serialize=True)
-            for c in range(self.n_cells):
-                self.cell_start[c] = total
+            for c in range(self.gate(self.n_cells)):
+                self.cell_start[c] = ti.min(total, self.pair_capacity)
                 total += self.cell_count[c]
-            self.cell_start[self.n_cells] = total
+            if self.active[None] != 0:
+                self.total[None] = total
+                self.cell_start[self.n_cells] = ti.min(total, self.pair_capacity)
         else:
             B, NB = ti.static(SCAN_BLOCK), ti.static(-(-self.n_cells // SCAN_BLOCK))
-            for b in range(NB):
+            for b in range(self.gate(NB)):
                 acc = 0
                 for c in range(b * B, ti.min((b + 1) * B, self.n_cells)):
                     acc += self.cell_count[c]
                 self.block_count[b] = acc
-            for b in range(NB):
+            for b in range(self.gate(NB)):
                 start = 0
                 for a in range(b):
                     start += self.block_count[a]
                 for c in range(b * B, ti.min((b + 1) * B, self.n_cells)):
-                    self.cell_start[c] = start
+                    self.cell_start[c] = ti.min(start, self.pair_capacity)
                     start += self.cell_count[c]
                 if b == NB - 1:
-                    self.cell_start[self.n_cells] = start
-            total = self.cell_start[self.n_cells]
-        return total
+                    self.total[None] = start
+                    self.cell_start[self.n_cells] = ti.min(start, self.pair_capacity)
+        if self.active[None] != 0:
+            self.needed[None] = ti.max(self.needed[None], self.total[None])
 
     @ti.kernel
     def _fill(self):
+        self.fill_pass()
+
+    @ti.func
+    def fill_pass(self):
         ti.loop_config(serialize=self.serial)
-        for c in range(self.n_cells):
+        for c in range(self.gate(self.n_cells)):
             self.cell_count[c] = 0  # reused as the fill cursor
         ti.loop_config(serialize=self.serial)
-        for t in range(self.n_triangles[None]):
+        for t in range(self.gate(self.n_triangles[None])):
             lo, hi = self.triangle_box(t)
             cmin, cmax = self.clamp_range(lo, hi)
             for i, j, k in ti.ndrange((cmin[0], cmax[0] + 1), (cmin[1], cmax[1] + 1), (cmin[2], cmax[2] + 1)):
                 cell = self.cell_index(ti.Vector([i, j, k]))
-                slot = ti.atomic_add(self.cell_count[cell], 1)
-                self.cell_triangles[self.cell_start[cell] + slot] = t
+                slot = self.cell_start[cell] + ti.atomic_add(self.cell_count[cell], 1)
+                if slot < self.pair_capacity:  # beyond: the rebuild asked for too many (needed says how many)
+                    self.cell_triangles[slot] = t
 
     @ti.kernel
     def _sort_cells(self):
         """Each cell's triangles in ascending index: a parallel fill appends them in the order threads arrive, and
         the collision stage's ranked tests visit candidates in list order, so without this two runs of one scene
         differ (insertion sort: a cell holds a few triangles)."""
-        for c in range(self.n_cells):
+        for c in range(self.gate(self.n_cells)):
             begin, end = self.cell_start[c], self.cell_start[c + 1]
             for a in range(begin + 1, end):
                 t = self.cell_triangles[a]

@@ -46,12 +46,8 @@ after the last pass are counted as unresolved. Rotations are not kept (Bridson's
 zone stops the sliding inside it: the zones are a last resort. The stage does not untangle a cloth that starts
 crossed (the run reports that, taichi_cloth.self_intersection).
 """
-from collections import deque
-
 import numpy as np
 import taichi as ti
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 
 from clothbase.fields import FieldBlock, fill_prefix
 from clothbase.fixedpoint import from_fixed, to_fixed
@@ -108,7 +104,6 @@ class SelfCollision(ParticleCollider):
             raise ValueError(f"self-collision friction must be >= 0, got {friction}")
         self.fixed_thickness = None if thickness is None else float(thickness)
         self.friction, self.passes, self.continuous = float(friction), int(passes), bool(continuous)
-        self.recent_zones: deque = deque(maxlen=RECENT_STEPS)  # (dt [s], impact zones) of the last steps
         self.max_candidates = int(max_candidates)
         self.triangles, self.n_triangles = triangles, n_triangles
         self.shapes = shapes
@@ -154,6 +149,23 @@ class SelfCollision(ParticleCollider):
         self.closing = blk.vector(4, ti.i32, 4 * P)  # the particles of the pairs that close this pass
         self.closing_kind = blk.scalar(ti.i8, 4 * P)
         self.n_closing = blk.scalar(ti.i32, ())
+        self.stale = blk.scalar(ti.i32, ())  # 1: the triangles changed, the candidates name the old ones
+        self.pass_live = blk.scalar(ti.i32, ())  # 1 while the proximity passes find contacts
+        # the impact zones (_zone_pass): a union-find forest over the particles of the step's closing pairs, the
+        # motion [m] and velocity [m/s] of each at the start of the zone passes, and each zone's sums at its root
+        self.parent = blk.scalar(ti.i32, P)
+        self.member = blk.scalar(ti.i32, P)
+        self.zone_motion = blk.vector(3, ti.f64, P)
+        self.zone_velocity = blk.vector(3, ti.f64, P)
+        self.zone_count = blk.scalar(ti.i32, P)
+        self.zone_held = blk.scalar(ti.i32, P)  # pinned particles
+        self.zone_mass = blk.scalar(ti.f64, P)  # [kg] of the free ones
+        self.zone_pin_motion = blk.vector(3, ti.f64, P)  # summed over the pinned [m]
+        self.zone_momentum = blk.vector(3, ti.f64, P)  # mass-weighted motion [kg m] and velocity [kg m/s]
+        self.zone_impulse = blk.vector(3, ti.f64, P)
+        self.step_zones = blk.scalar(ti.i32, ())  # impact zones made in this step
+        self.zone_log = blk.vector(2, ti.f64, RECENT_STEPS)  # (dt [s], impact zones) of the last steps, a ring
+        self.zone_steps = blk.scalar(ti.i64, ())
         blk.finalize(self)
         self.topology_changed(*self.shapes[0])  # also marks the candidates stale: the first step gathers
         # sized by the shape with the most (triangle, cell) pairs; built on boxes swept from x_start to x
@@ -181,101 +193,122 @@ class SelfCollision(ParticleCollider):
         self.on_seam.from_numpy(flags)
         self.thickness = self._thickness_for(np.asarray(positions, dtype=np.float64), t)
         self.tau[None] = self.thickness
-        self.stale = True  # the candidates name the old triangles and edges
+        self.stale[None] = 1  # the candidates name the old triangles and edges
 
     def resolve(self, dt: float) -> None:
-        """After a step of dt [s]: gather the candidates (unless every particle is still within reach), the
-        proximity passes, then the continuous stage (module docstring)."""
-        if self.stale or self._left_reach():
-            self.grid.build()
-            self._gather()
-            self.stale = False
+        """After a step of dt [s]: gather the candidates again if a particle left its reach, the proximity passes,
+        then the continuous stage (module docstring). Decided on the device: a serial cloth takes it all in one
+        launch in one thread (no read); a parallel one launches the stages, and reads the count of closing pairs
+        after each test of the continuous stage (once a step at rest)."""
+        if self.serial:
+            self._resolve_in_thread(1.0 / dt, dt)
+            return
+        self._begin_step()
+        self._regather(0)
         for _ in range(self.passes):
-            if self._pass() == 0:  # nothing touched: the later passes would find nothing either
-                break
+            self._pass()
         if self.continuous:
-            self.recent_zones.append((dt, self._continuous_stage(dt)))
+            it = 0
+            while True:
+                self._regather(1)
+                self._closing_pass()
+                if self.n_closing[None] == 0:
+                    break
+                if it < IMPULSE_PASSES:
+                    self._respond(1.0 / dt)
+                elif it < IMPULSE_PASSES + ZONE_PASSES:
+                    self._zone(int(it == IMPULSE_PASSES), dt)
+                else:
+                    self._give_up()
+                    break
+                it += 1
+        self._log_zones(dt)
 
-    def _continuous_stage(self, dt: float) -> int:
-        """The continuous stage (module docstring) after a step of dt [s]; returns how many impact zones it made."""
-        self._gather_again_if_needed()
-        n = self._closing_pass()
-        for _ in range(IMPULSE_PASSES):
-            if n == 0:
-                return 0
-            self._sort_closing(n)
-            self._respond(n, 1.0 / dt)
-            self._gather_again_if_needed()
-            n = self._closing_pass()
-        return self._impact_zones(n, dt) if n else 0
+    def _regather(self, counted: int) -> None:
+        """The grid and the candidates again, where a particle left its reach (or the triangles changed)."""
+        self._check_reach(counted)
+        self.grid.rebuild()
+        self._gather()
+
+    @ti.kernel
+    def _resolve_in_thread(self, inv_dt: ti.f64, dt: ti.f64):
+        """The whole of `resolve` in one thread (a serial cloth): the same stages, decided in the same order."""
+        ti.loop_config(serialize=True)
+        for _ in range(1):
+            self._begin_pass()
+            phase, it = 0, 0  # phase 0: the proximity passes; then the continuous stage's tests
+            while True:
+                self._check_reach_pass(phase)
+                self.grid.build_pass()
+                self._gather_pass()
+                if phase == 0:
+                    for _p in range(self.passes):
+                        self._proximity_pass()
+                    phase = 1
+                    if ti.static(not self.continuous):
+                        break
+                else:
+                    self._closing_test()
+                    n = self.n_closing[None]
+                    if n == 0:
+                        break
+                    if it < IMPULSE_PASSES:
+                        self._respond_pass(ti.cast(inv_dt, self.x.dtype))
+                    elif it < IMPULSE_PASSES + ZONE_PASSES:
+                        self._zone_pass(it == IMPULSE_PASSES, dt)
+                    else:
+                        self.counters[7] += n
+                        break
+                    it += 1
+            self._log_zones_pass(dt)
+
+    @ti.kernel
+    def _begin_step(self):
+        self._begin_pass()
+
+    @ti.func
+    def _begin_pass(self):
+        self.pass_live[None] = 1
+        self.n_closing[None] = 0
+        self.step_zones[None] = 0
+
+    @ti.kernel
+    def _give_up(self):
+        """The pairs still closing after the last zone pass: counted as unresolved."""
+        self.counters[7] += self.n_closing[None]
+
+    @ti.kernel
+    def _log_zones(self, dt: ti.f64):
+        self._log_zones_pass(dt)
+
+    @ti.func
+    def _log_zones_pass(self, dt):
+        """Append (dt [s], the step's impact zones) to the ring of the last RECENT_STEPS steps."""
+        k = self.zone_steps[None]
+        self.zone_log[ti.cast(k % RECENT_STEPS, ti.i32)] = ti.Vector([dt, ti.cast(self.step_zones[None], ti.f64)])
+        self.zone_steps[None] = k + 1
 
     def zones_in_last(self, seconds: float) -> int:
         """The impact zones made in the last `seconds` [s] of steps (at most the last RECENT_STEPS steps)."""
+        steps, log = int(self.zone_steps[None]), self.zone_log.to_numpy()
         total, span = 0, 0.0
-        for dt, zones in reversed(self.recent_zones):
+        for k in range(steps - 1, max(steps - RECENT_STEPS, 0) - 1, -1):
             if span >= seconds:
                 break
-            total, span = total + zones, span + dt
+            dt, zones = log[k % RECENT_STEPS]
+            total, span = total + int(zones), span + dt
         return total
 
-    def _sort_closing(self, n: int) -> None:
-        """Put the n recorded closing pairs in a fixed order (the parallel test records them in any order, and the
-        one-thread response depends on it)."""
-        k = min(n, self.closing.shape[0])
-        ids = self.closing.to_numpy()[:k]
-        kind = self.closing_kind.to_numpy()[:k]
-        order = np.lexsort((ids[:, 3], ids[:, 2], ids[:, 1], ids[:, 0], kind))
-        fill_prefix(self.closing, ids[order])
-        fill_prefix(self.closing_kind, kind[order])
+    # ------------------------------------------------------------------ reported with the frame's measurement
+    report_slots = 1  # the most (triangle, cell) pairs a grid rebuild asked for since the last frame
 
-    def _impact_zones(self, n: int, dt: float) -> int:
-        """Move the particles of the closing pairs (n found by the first pass) as rigid impact zones until no pair
-        closes (module docstring, step 3); returns how many zones it made over its passes. Runs on the host: zones
-        are rare and small, and numpy's sums keep a fixed order."""
-        P = int(self.n_particles[None])
-        x0 = self.x_start.to_numpy()[:P].astype(np.float64)
-        x = self.x.to_numpy()
-        v = self.v.to_numpy()
-        inv_mass = self.inv_mass.to_numpy()[:P].astype(np.float64)
-        motion, velocity = x[:P].astype(np.float64) - x0, v[:P].astype(np.float64)
-        pinned = inv_mass == 0
-        mass = np.where(pinned, 0.0, 1.0 / np.where(pinned, 1.0, inv_mass))
-        found, made = [], 0
-        for _ in range(ZONE_PASSES):
-            ids = self.closing.to_numpy()[:min(n, self.closing.shape[0])].astype(np.int64)
-            self.counters[5] += n
-            found.append(ids)
-            pairs = np.concatenate(found)
-            graph = coo_matrix((np.ones(3 * len(pairs)), (np.repeat(pairs[:, 0], 3), pairs[:, 1:].ravel())),
-                               shape=(P, P))
-            members = np.unique(pairs)
-            _, zone = connected_components(graph, directed=False)
-            z = zone[members]
-            count = np.bincount(z, minlength=P)
-            held = np.bincount(z, weights=pinned[members], minlength=P)
-            m = np.bincount(z, weights=mass[members], minlength=P)
-            shift = np.empty((P, 3))
-            drift = np.empty((P, 3))
-            for c in range(3):
-                pin_mean = np.bincount(z, weights=np.where(pinned[members], motion[members, c], 0.0), minlength=P)
-                free_mean = np.bincount(z, weights=mass[members] * motion[members, c], minlength=P)
-                free_vel = np.bincount(z, weights=mass[members] * velocity[members, c], minlength=P)
-                with np.errstate(invalid="ignore", divide="ignore"):
-                    shift[:, c] = np.where(held > 0, pin_mean / held, free_mean / m)
-                    drift[:, c] = np.where(held > 0, shift[:, c] / dt, free_vel / m)
-            free = members[~pinned[members]]
-            x[free] = x0[free] + shift[zone[free]]
-            v[free] = drift[zone[free]]
-            self.x.from_numpy(x)
-            self.v.from_numpy(v)
-            made += int(np.count_nonzero(count > 1))
-            self._gather_again_if_needed()
-            n = self._closing_pass()
-            if n == 0:
-                break
-        self.counters[6] += made
-        self.counters[7] += n
-        return made
+    @ti.kernel
+    def report(self, out: ti.template(), offset: ti.i32):
+        out[offset] = ti.cast(self.grid.needed[None], ti.f64)
+        self.grid.needed[None] = 0
+
+    def reported(self, values) -> None:
+        self.grid.check_capacity(int(values[0]))
 
     def counter_values(self) -> dict:
         names = ("candidates", "edge candidates", "point-triangle contacts", "edge-edge contacts",
@@ -340,7 +373,11 @@ class SelfCollision(ParticleCollider):
 
     @ti.kernel
     def _gather(self):
-        """Gather the candidates (the grid is built): each particle's reach is its motion over the step (start to
+        self._gather_pass()
+
+    @ti.func
+    def _gather_pass(self):
+        """Gather the candidates (the grid is built; nothing while it is not `active`): each particle's reach is its motion over the step (start to
         now) grown by REUSE_MARGIN thicknesses, a triangle's box the box of its vertices' reaches; a particle gathers
         the triangles whose boxes meet its reach padded by the thickness, an edge the edges whose reach boxes meet
         its own so padded (found through the grid, whose cells hold the triangles' swept boxes padded by (1 +
@@ -349,18 +386,18 @@ class SelfCollision(ParticleCollider):
         # in parallel even on a small cloth: a few milliseconds of work, against a dispatch of ~0.1 ms
         tau = ti.cast(self.tau[None], ti.f32)
         margin = ti.cast(REUSE_MARGIN, ti.f32) * tau
-        for i in range(self.n_particles[None]):
+        for i in range(self.grid.gate(self.n_particles[None])):
             p0, p1 = ti.cast(self.x_start[i], ti.f32), ti.cast(self.x[i], ti.f32)
             self.reach_lo[i], self.reach_hi[i] = ti.min(p0, p1) - margin, ti.max(p0, p1) + margin
-        for t in range(self.n_triangles[None]):
+        for t in range(self.grid.gate(self.n_triangles[None])):
             tri = self.triangles[t]
             self.box_lo[t] = ti.min(self.reach_lo[tri[0]], self.reach_lo[tri[1]], self.reach_lo[tri[2]])
             self.box_hi[t] = ti.max(self.reach_hi[tri[0]], self.reach_hi[tri[1]], self.reach_hi[tri[2]])
-        for i in range(self.n_particles[None]):
+        for i in range(self.grid.gate(self.n_particles[None])):
             n = self._collect(self.reach_lo[i] - tau, self.reach_hi[i] + tau, i, self.cand, self.full, i, i, False)
             self.n_cand[i] = n
             ti.atomic_add(self.counters[0], n)
-        for e in range(self.n_edges[None]):
+        for e in range(self.grid.gate(self.n_edges[None])):
             # edges within one ring of the edge's ends are its neighbours, not its contacts
             ab = self.edges[e]
             lo = ti.min(self.reach_lo[ab[0]], self.reach_lo[ab[1]])
@@ -368,6 +405,8 @@ class SelfCollision(ParticleCollider):
             n = self._collect(lo - tau, hi + tau, e, self.edge_cand, self.edge_full, ab[0], ab[1], True)
             self.n_edge_cand[e] = n
             ti.atomic_add(self.counters[1], n)
+        if self.grid.active[None] != 0:
+            self.stale[None] = 0
 
     # ------------------------------------------------------------------ the response
     @ti.func
@@ -489,18 +528,23 @@ class SelfCollision(ParticleCollider):
                     ti.atomic_add(self.pass_contacts[None], 1)
 
     @ti.kernel
-    def _pass(self) -> ti.i32:
-        """One Jacobi pass over the gathered pairs; returns how many contacts it found."""
+    def _pass(self):
+        self._proximity_pass()
+
+    @ti.func
+    def _proximity_pass(self):
+        """One Jacobi pass over the gathered pairs, while the pass before found a contact (pass_live)."""
         tau = ti.cast(self.tau[None], self.x.dtype)
         friction = ti.cast(self.friction, self.x.dtype)
         self.pass_contacts[None] = 0
+        live = self.pass_live[None] != 0
         ti.loop_config(serialize=self.serial)
-        for i in range(self.n_particles[None]):
+        for i in range(ti.select(live, self.n_particles[None], 0)):
             self.dx[i] = ti.Vector.zero(ti.i64, 3)
             self.dv[i] = ti.Vector.zero(ti.i64, 3)
             self.hits[i] = 0
         ti.loop_config(serialize=self.serial)
-        for i in range(self.n_particles[None]):
+        for i in range(ti.select(live, self.n_particles[None], 0)):
             for k in range(self.n_cand[i]):
                 t = self.cand[i, k]
                 tri = self.triangles[t]
@@ -508,7 +552,7 @@ class SelfCollision(ParticleCollider):
                 if not self._seams_meet(self.on_seam[i], seams):
                     self._point_triangle(i, t, tau, friction)
         ti.loop_config(serialize=self.serial)
-        for e in range(self.n_edges[None]):
+        for e in range(ti.select(live, self.n_edges[None], 0)):
             ab = self.edges[e]
             for k in range(self.n_edge_cand[e]):
                 f = self.edge_cand[e, k]
@@ -517,34 +561,34 @@ class SelfCollision(ParticleCollider):
                                         self.on_seam[cd[0]] + self.on_seam[cd[1]]):
                     self._edge_edge(e, f, tau, friction)
         ti.loop_config(serialize=self.serial)
-        for i in range(self.n_particles[None]):
+        for i in range(ti.select(live, self.n_particles[None], 0)):
             if self.hits[i] > 0:
                 self.x[i] += from_fixed(self.dx[i], self.x.dtype) / self.hits[i]
                 self.v[i] += from_fixed(self.dv[i], self.x.dtype) / self.hits[i]
-        return self.pass_contacts[None]
+        # nothing touched: the later passes would find nothing either
+        self.pass_live[None] = ti.select(self.pass_contacts[None] > 0, 1, 0)
 
     # ------------------------------------------------------------------ the continuous stage
     @ti.kernel
-    def _left_reach(self) -> ti.i32:
-        """How many particles lie outside the reach they gathered their candidates for (_gather): while none does,
-        a pair that was not gathered cannot touch, since the boxes of its two sides do not meet."""
-        out = 0
+    def _check_reach(self, counted: ti.i32):
+        self._check_reach_pass(counted)
+
+    @ti.func
+    def _check_reach_pass(self, counted):
+        """Turn the grid's rebuild (and the gathering) on where the triangles changed or a particle lies outside the
+        reach it gathered its candidates for (_gather): while none does, a pair that was not gathered cannot touch,
+        since the boxes of its two sides do not meet. counted: the continuous stage's check (a response carried a
+        particle out; rare, since a push is shorter than the reach's margin), counted as gathered again."""
+        left = 0
         ti.loop_config(serialize=self.serial)
         for i in range(self.n_particles[None]):
             p, q = ti.cast(self.x_start[i], ti.f32), ti.cast(self.x[i], ti.f32)
             lo, hi = self.reach_lo[i], self.reach_hi[i]
             if any(ti.min(p, q) < lo) or any(ti.max(p, q) > hi):
-                out += 1
-        return out
-
-    def _gather_again_if_needed(self) -> None:
-        """Gather the candidates again, from the motion as it is now, if a response carried a particle outside its
-        reach (rare: a push is shorter than the reach's margin)."""
-        left = self._left_reach()
-        if left:
+                left += 1
+        if counted != 0:
             self.counters[8] += left
-            self.grid.build()
-            self._gather()
+        self.grid.active[None] = ti.select(left > 0 or self.stale[None] != 0, 1, 0)
 
     @ti.func
     def _closes(self, ids, kind):
@@ -615,14 +659,21 @@ class SelfCollision(ParticleCollider):
                 self._closes(ids, 1)
 
     @ti.kernel
-    def _respond(self, n: ti.i32, inv_dt: ti.f64):
-        """Stop the approach of the n recorded closing pairs one after the other (Gauss-Seidel: each sees the
-        corrections before it, so a stack of layers settles in a few passes; the list is short, one thread)."""
+    def _respond(self, inv_dt: ti.f64):
+        ti.loop_config(serialize=True)
+        for _ in range(1):
+            self._respond_pass(ti.cast(inv_dt, self.x.dtype))
+
+    @ti.func
+    def _respond_pass(self, rate):
+        """Put the recorded closing pairs in a fixed order (the parallel test records them in any order), then stop
+        their approach one after the other (Gauss-Seidel: each sees the corrections before it, so a stack of layers
+        settles in a few passes; the list is short, one thread). rate = 1/dt [1/s]."""
         s = ti.cast(SEPARATION, self.x.dtype)
         xi = ti.cast(FLOOR * self.tau[None], self.x.dtype)
-        rate = ti.cast(inv_dt, self.x.dtype)
-        ti.loop_config(serialize=True)
-        for k in range(ti.min(n, self.closing.shape[0])):
+        n = ti.min(self.n_closing[None], self.closing.shape[0])
+        self._sort_closing(n)
+        for k in range(n):
             ids = self.closing[k]
             if self.closing_kind[k] == 0:
                 toi = self._pair_toi(ids, False, s, xi)
@@ -632,6 +683,123 @@ class SelfCollision(ParticleCollider):
                 toi = self._pair_toi(ids, True, s, xi)
                 if toi < 1:
                     self._stop_approach(ids, True, toi, rate)
+
+    @ti.func
+    def _closing_before(self, a, b):
+        """Whether closing pair a sorts before pair b: by kind, then by the particles' ids."""
+        ka, kb = self.closing_kind[a], self.closing_kind[b]
+        out = ka < kb
+        if ka == kb:
+            pa, pb = self.closing[a], self.closing[b]
+            decided = False
+            for j in ti.static(range(4)):
+                if not decided and pa[j] != pb[j]:
+                    out = pa[j] < pb[j]
+                    decided = True
+        return out
+
+    @ti.func
+    def _swap_closing(self, a, b):
+        self.closing[a], self.closing[b] = self.closing[b], self.closing[a]
+        self.closing_kind[a], self.closing_kind[b] = self.closing_kind[b], self.closing_kind[a]
+
+    @ti.func
+    def _sift_closing(self, root, end):
+        """Restore the max-heap of closing[:end] below `root`."""
+        r = root
+        while 2 * r + 1 < end:
+            child = 2 * r + 1
+            if child + 1 < end and self._closing_before(child, child + 1):
+                child += 1
+            if self._closing_before(r, child):
+                self._swap_closing(r, child)
+                r = child
+            else:
+                break
+
+    @ti.func
+    def _sort_closing(self, n):
+        """Sort closing[:n] (heap sort, one thread: O(n log n) for any list)."""
+        for k in range(n // 2):
+            self._sift_closing(n // 2 - 1 - k, n)
+        for k in range(n - 1):
+            self._swap_closing(0, n - 1 - k)
+            self._sift_closing(0, n - 1 - k)
+
+    @ti.func
+    def _zone_root(self, p):
+        r = p
+        while self.parent[r] != r:
+            r = self.parent[r]
+        return r
+
+    @ti.kernel
+    def _zone(self, first: ti.i32, dt: ti.f64):
+        ti.loop_config(serialize=True)
+        for _ in range(1):
+            self._zone_pass(first, dt)
+
+    @ti.func
+    def _zone_pass(self, first, dt):
+        """One pass of impact zones (module docstring, step 3), in one thread (zones are rare and small; the sums
+        then run in a fixed order). first: the stage's first pass, which takes each particle's motion and velocity
+        as they are now. Merges the particles of the recorded closing pairs into zones (the connected sets of all
+        the pairs found by the passes so far: a union-find forest, joined to the smaller root), and moves every
+        free particle of a zone by the zone's rigid translation from the start of the step (module docstring)."""
+        P = self.n_particles[None]
+        if first:
+            for p in range(P):
+                self.parent[p] = p
+                self.member[p] = 0
+                self.zone_motion[p] = ti.cast(self.x[p], ti.f64) - ti.cast(self.x_start[p], ti.f64)
+                self.zone_velocity[p] = ti.cast(self.v[p], ti.f64)
+        for k in range(ti.min(self.n_closing[None], self.closing.shape[0])):
+            ids = self.closing[k]
+            for j in ti.static(range(4)):
+                self.member[ids[j]] = 1
+            for j in ti.static(range(1, 4)):
+                a, b = self._zone_root(ids[0]), self._zone_root(ids[j])
+                if a != b:
+                    self.parent[ti.max(a, b)] = ti.min(a, b)
+        for p in range(P):
+            if self.member[p] != 0:
+                r = self._zone_root(p)
+                self.parent[p] = r
+                self.zone_count[r] = 0
+                self.zone_held[r] = 0
+                self.zone_mass[r] = 0.0
+                self.zone_pin_motion[r] = ti.Vector.zero(ti.f64, 3)
+                self.zone_momentum[r] = ti.Vector.zero(ti.f64, 3)
+                self.zone_impulse[r] = ti.Vector.zero(ti.f64, 3)
+        for p in range(P):
+            if self.member[p] != 0:
+                r = self.parent[p]
+                self.zone_count[r] += 1
+                if self.inv_mass[p] == 0:
+                    self.zone_held[r] += 1
+                    self.zone_pin_motion[r] += self.zone_motion[p]
+                else:
+                    m = 1.0 / ti.cast(self.inv_mass[p], ti.f64)
+                    self.zone_mass[r] += m
+                    self.zone_momentum[r] += m * self.zone_motion[p]
+                    self.zone_impulse[r] += m * self.zone_velocity[p]
+        made = 0
+        for p in range(P):
+            if self.member[p] != 0:
+                r = self.parent[p]
+                if r == p and self.zone_count[p] > 1:
+                    made += 1
+                if self.inv_mass[p] != 0:
+                    # a zone holding a pin moves with the pins' mean motion (the pin carries the zone)
+                    shift = self.zone_momentum[r] / self.zone_mass[r]
+                    drift = self.zone_impulse[r] / self.zone_mass[r]
+                    if self.zone_held[r] > 0:
+                        shift = self.zone_pin_motion[r] / self.zone_held[r]
+                        drift = shift / dt
+                    self.x[p] = ti.cast(ti.cast(self.x_start[p], ti.f64) + shift, self.x.dtype)
+                    self.v[p] = ti.cast(drift, self.x.dtype)
+        self.counters[6] += made
+        self.step_zones[None] += made
 
     @ti.func
     def _walk_ccd(self, row, lo, hi, skip_a, skip_b, edges: ti.template(), s, xi):
@@ -653,9 +821,14 @@ class SelfCollision(ParticleCollider):
                         self._point_triangle_ccd(row, t, s, xi)
 
     @ti.kernel
-    def _closing_pass(self) -> ti.i32:
-        """Test every gathered pair along the step's straight-line motion and record the pairs that close; returns
-        how many. A row whose candidates overflowed walks the grid instead of its list, so no pair is missed."""
+    def _closing_pass(self):
+        self._closing_test()
+
+    @ti.func
+    def _closing_test(self):
+        """Test every gathered pair along the step's straight-line motion and record the pairs that close (n_closing
+        of them, counted as closing pairs). A row whose candidates overflowed walks the grid instead of its list, so
+        no pair is missed."""
         s = ti.cast(SEPARATION, self.x.dtype)
         xi = ti.cast(FLOOR * self.tau[None], self.x.dtype)
         tau = ti.cast(self.tau[None], ti.f32)
@@ -677,7 +850,7 @@ class SelfCollision(ParticleCollider):
                 lo = ti.min(self.reach_lo[ab[0]], self.reach_lo[ab[1]]) - tau
                 hi = ti.max(self.reach_hi[ab[0]], self.reach_hi[ab[1]]) + tau
                 self._walk_ccd(e, lo, hi, ab[0], ab[1], True, s, xi)
-        return self.n_closing[None]
+        self.counters[5] += self.n_closing[None]
 
     def describe(self) -> dict:
         return {"kind": "self"}

@@ -126,6 +126,18 @@ class Colliders(Controller):
         return next((c for c in self.objects if isinstance(c, SelfCollision)), None)
 
     @property
+    def report_slots(self) -> int:
+        """Self-collision's per-frame values (its grid's capacity check) travel with the frame's measurement."""
+        sc = self.self_collision
+        return sc.report_slots if sc is not None else 0
+
+    def report(self, out, offset: int) -> None:
+        self.self_collision.report(out, offset)
+
+    def reported(self, values) -> None:
+        self.self_collision.reported(values)
+
+    @property
     def bodies(self) -> list:
         """The mesh colliders (bodies)."""
         return [c for c in self.objects if isinstance(c, MeshCollider)]

@@ -3,9 +3,9 @@ controllers need (taichi_cloth.hostreads). Inside the steps, no read: CG, Newton
 device. Each case runs a few frames to its steady state, then counts the reads of 4 frames exactly. Every
 integrator, on a sphere and a mesh: tests/test_collision.py (drop_cloth).
 
-Not covered: self-collision (its continuous stage sorts the closing pairs and merges impact zones on the host) and
-an implicit step forced parallel on the CPU (TAICHI_CLOTH_PARALLEL_FROM), whose CG reads once per chunk of
-iterations: docs/performance.md, "Host reads". The GPU's policy: tests/test_loop_policy.py.
+Not covered: a cloth forced parallel on the CPU (TAICHI_CLOTH_PARALLEL_FROM), whose CG reads once per chunk of
+iterations and whose self-collision reads the count of closing pairs after each continuous test: docs/performance.md,
+"Host reads". The GPU's policy: tests/test_loop_policy.py.
 """
 import numpy as np
 import pytest
@@ -91,3 +91,25 @@ def test_the_counter_names_every_kind_of_read():
         sc.forces.gravity[None] = [0.0, -9.81, 0.0]
         sc.state.x.from_numpy(sc.state.x.to_numpy())
     assert writes.total == 1  # the to_numpy; writes wait for nothing
+
+
+@pytest.mark.parametrize("integrator", ["implicit", "explicit"])
+def test_self_collision_reads_nothing_inside_the_steps_while_impact_zones_hold_the_cloth(integrator):
+    """The jerked sheet (benchmarks/self_collision_stress.py, 16 x 16) folds over itself: in the counted frames the
+    passes push its layers apart and (implicit) the continuous stage stops closing pairs and merges them into impact
+    zones in the steps that need it, all on the device; the grid's capacity check travels with the measurement."""
+    from benchmarks.self_collision_stress import jerked_sheet
+
+    scene, _ = jerked_sheet(True, small=True, integrator=integrator, step="fixed")
+    obj = scene.controller("colliders").self_collision
+    scene.run(6, progress=False, until_rest=False)
+    before = obj.counter_values()
+    summary = scene.run(FRAMES + 1, progress=False, until_rest=False)
+    assert_one_read_per_frame(summary)
+    after = obj.counter_values()
+    if integrator == "implicit":  # at 1/240 s the fold closes pairs every frame
+        assert after["closing pairs"] > before["closing pairs"]
+        assert after["impact zones"] > before["impact zones"]
+    else:  # its short steps keep the layers apart by the proximity passes alone
+        assert after["point-triangle contacts"] > before["point-triangle contacts"]
+        assert after["edge-edge contacts"] > before["edge-edge contacts"]
