@@ -377,13 +377,13 @@ class SelfCollision(ParticleCollider):
 
     @ti.func
     def _gather_pass(self):
-        """Gather the candidates (the grid is built; nothing while it is not `active`): each particle's reach is its motion over the step (start to
-        now) grown by REUSE_MARGIN thicknesses, a triangle's box the box of its vertices' reaches; a particle gathers
-        the triangles whose boxes meet its reach padded by the thickness, an edge the edges whose reach boxes meet
-        its own so padded (found through the grid, whose cells hold the triangles' swept boxes padded by (1 +
-        REUSE_MARGIN) thicknesses: the triangles' boxes and more). While every particle stays in its reach, every
-        pair within a thickness of each other is among the candidates."""
-        # in parallel even on a small cloth: a few milliseconds of work, against a dispatch of ~0.1 ms
+        """Gather the candidates (the grid is built; nothing while it is not `active`): each particle's reach is its
+        motion over the step (start to now) grown by REUSE_MARGIN thicknesses, a triangle's box the box of its
+        vertices' reaches; a particle gathers the triangles whose boxes meet its reach padded by the thickness, an
+        edge the edges whose reach boxes meet its own so padded (found through the grid, whose cells hold the
+        triangles' swept boxes padded by (1 + REUSE_MARGIN) thicknesses: the triangles' boxes and more). While every
+        particle stays in its reach, every pair within a thickness of each other is among the candidates. In
+        parallel when launched alone (`_gather`), in one thread inside `_resolve_in_thread`."""
         tau = ti.cast(self.tau[None], ti.f32)
         margin = ti.cast(REUSE_MARGIN, ti.f32) * tau
         for i in range(self.grid.gate(self.n_particles[None])):
