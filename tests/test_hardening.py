@@ -1,8 +1,12 @@
 """Bad input as a user gives it: each kind gets one `error:` line (exit 2) or one `warning:` line, never a traceback
-or a crash. The CLI cases run `python -m taichi_cloth` in a subprocess."""
+or a crash; Ctrl-C ends a command with one `interrupted:` line (exit 130) and keeps what was written. The CLI cases
+run `python -m taichi_cloth` (or a demo script) in a subprocess."""
+import errno
 import os
+import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import ezdxf
@@ -53,12 +57,28 @@ def cli(*args, cwd=None, timeout=300):
     return done.returncode, done.stdout, err
 
 
+def demo(name, *args, timeout=300):
+    """cli's (exit code, stdout, stderr lines) of the demo script demos/NAME.py."""
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    done = subprocess.run([sys.executable, str(ROOT / "demos" / f"{name}.py"), *map(str, args)], capture_output=True,
+                          text=True, cwd=ROOT, env=env, timeout=timeout)
+    noise = ("[Taichi]", "[W ", "[I ")
+    return done.returncode, done.stdout, [line for line in done.stderr.splitlines()
+                                          if line.strip() and not line.startswith(noise)]
+
+
 def one_error(rc, err, *words):
     assert rc == 2, err
     assert len(err) == 1 and err[0].startswith("error: "), err
     for w in words:
         assert w in err[0], err[0]
     return err[0]
+
+
+def one_clean_error(rc, out, err, *words):
+    """one_error, and nothing on stdout that belongs on stderr (an `error:` line, a traceback)."""
+    assert "Traceback" not in out and "error:" not in out, out
+    return one_error(rc, err, *words)
 
 
 # ------------------------------------------------------------------------------------------------ resources
@@ -182,6 +202,64 @@ def test_an_output_dir_that_is_a_file_is_refused_before_the_scene_is_built(tmp_p
     one_error(rc, err, f"[output] dir '{(tmp_path / 'taken').as_posix()}' is a file, not a folder")
     rc, _, err = cli("run", scene_file(tmp_path, out=(tmp_path / "taken" / "sub").as_posix()), "--no-progress")
     one_error(rc, err, f"lies below the file {tmp_path / 'taken'}")
+
+
+def test_a_full_disk_is_one_line_naming_the_file(monkeypatch, capsys):
+    """A file-system error in the middle of a command (here a full disk while a run writes its recording: write()
+    names no file) ends as one line naming the file the run was writing and the reason, exit 2."""
+    from taichi_cloth import cli as cli_module
+
+    def full(*_):
+        exc = OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        exc.output = "out/t.rrd"  # as taichi_cloth.run.run_scene_file marks what it was writing
+        raise exc
+
+    monkeypatch.setattr(cli_module, "run_scene_file", full)
+    assert cli_module.main(["run", "t.toml"]) == 2
+    captured = capsys.readouterr()
+    assert captured.err.splitlines() == ["error: out/t.rrd: no space left on device"] and not captured.out
+
+    def read_only():
+        raise OSError(errno.EROFS, os.strerror(errno.EROFS), "out/t.obj")
+
+    assert cli_module.ends(read_only) == 2
+    assert capsys.readouterr().err.splitlines() == ["error: out/t.obj: read-only file system"]
+
+
+# ------------------------------------------------------------------------------------------------ Ctrl-C
+def test_ctrl_c_ends_a_run_with_one_line_and_keeps_its_recording(tmp_path):
+    """SIGINT while a run records: exit 130, one `interrupted:` line naming the recording, no traceback, and the
+    recording made so far stays on disk and reads back."""
+    import rerun as rr
+
+    path = scene_file(tmp_path, frames=100000)  # 1.7 million steps: minutes, stopped after the first frames
+    path.write_text(path.read_text().replace("record = false", "record = true"))
+    rrd = tmp_path / "out" / "t.rrd"
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    # a terminal's Ctrl-C: SIGINT delivered (a shell starts background jobs with it ignored, and children inherit that)
+    proc = subprocess.Popen([sys.executable, "-m", "taichi_cloth", "run", str(path), "--no-progress", "--yes"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT, env=env,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    try:
+        deadline, first = time.monotonic() + 120, None
+        while time.monotonic() < deadline and proc.poll() is None:
+            size = rrd.stat().st_size if rrd.exists() else 0
+            first = first or size or None
+            if first and size > first:  # frames are being written
+                break
+            time.sleep(0.1)
+        assert proc.poll() is None, proc.communicate()
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    assert proc.returncode == 130, err
+    assert "Traceback" not in out + err
+    lines = [line for line in err.splitlines() if line.strip() and not line.startswith(("[Taichi]", "[W ", "[I "))]
+    assert lines == [f"interrupted: stopped by Ctrl-C; kept what was written to {rrd}"]
+    frames = [c for c in rr.chunk.RrdReader(rrd).stream().to_chunks() if c.entity_path == "/cloth/mesh"
+              and not c.is_static]
+    assert frames  # the recording so far, closed and readable
 
 
 # ------------------------------------------------------------------------------------------------ messages
