@@ -12,6 +12,7 @@ from pathlib import Path
 
 from taichi_cloth import cli
 from taichi_cloth.cli import add_run_arguments, rerun_command
+from taichi_cloth.paths import check_output_folder
 
 DEMOS = Path(__file__).resolve().parent
 SCENES = DEMOS / "scenes"
@@ -22,13 +23,14 @@ __all__ = ["DEMOS", "GARMENTS", "SCENES", "arguments", "ends", "opened_with"]
 
 def arguments(doc: str, argv=None, extra=None) -> argparse.Namespace:
     """The demo's command line: --out, --frames, --integrator, --dt, --arch, --precision, --quality, --no-progress,
-    --yes, --png (as `python -m taichi_cloth run`), plus what `extra(parser)` adds."""
+    --yes, --png (as `python -m taichi_cloth run`), plus what `extra(parser)` adds. An --out that cannot be written
+    to raises OSError (taichi_cloth.paths.check_output_folder)."""
     parser = argparse.ArgumentParser(description=doc.strip().splitlines()[0])
     add_run_arguments(parser)
     if extra is not None:
         extra(parser)
     args = parser.parse_args(argv)
-    args.out = Path(args.out or "out")
+    args.out = check_output_folder(args.out or "out")  # a folder that cannot be written: refused before any work
     return args
 
 

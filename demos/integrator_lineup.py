@@ -23,6 +23,7 @@ def main(argv=None) -> int:
     import taichi_cloth as tc
     from taichi_cloth.cli import rerun_command
     from taichi_cloth.integrators import INTEGRATORS
+    from taichi_cloth.paths import check_output_folder
     from taichi_cloth.run import load_scene_file
 
     p = argparse.ArgumentParser(description=__doc__.strip().splitlines()[0])
@@ -33,7 +34,7 @@ def main(argv=None) -> int:
     p.add_argument("--arch", default="cpu", choices=("cpu", "gpu"))
     p.add_argument("--no-progress", action="store_true")
     args = p.parse_args(argv)
-    out = Path(args.out)
+    out = check_output_folder(args.out)  # a folder that cannot be written: refused before any work
     rows, finals = [], {}
     with tc.Recorder(out / "integrator_lineup.rrd", recording_name="integrator line-up") as rec:
         for k, name in enumerate(args.integrator):

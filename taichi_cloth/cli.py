@@ -23,6 +23,7 @@ from .garment.pattern import unit_scale
 from .guards import MAX_STEPS
 from .integrators import INTEGRATORS
 from .material import MATERIALS
+from .paths import check_output_folder
 from .garment.garment import RESOLUTIONS
 from .quality import QUALITIES
 from .run import run_scene_file as run_and_record
@@ -164,6 +165,7 @@ def _cmd_flatten(args) -> int:
     if out.suffix.lower() != ".dxf":
         print(f"error: --out must name a .dxf file, got {out}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    check_output_folder(out.parent)  # before the flattening: an OSError naming the folder when it cannot be one
     try:
         scale = unit_scale(args.units)
         pieces = [(Path(m).stem, *load_triangle_mesh(m, scale=scale), None) for m in args.meshes]

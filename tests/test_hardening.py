@@ -204,6 +204,50 @@ def test_an_output_dir_that_is_a_file_is_refused_before_the_scene_is_built(tmp_p
     one_error(rc, err, f"lies below the file {tmp_path / 'taken'}")
 
 
+def test_a_scene_or_mesh_path_that_is_a_folder_is_named_as_one(tmp_path):
+    rc, out, err = cli("run", tmp_path, "--no-progress")
+    one_clean_error(rc, out, err, f"error: {tmp_path}: is a folder, not a scene file")
+    rc, out, err = cli("flatten", tmp_path, "--out", tmp_path / "x.dxf")
+    one_clean_error(rc, out, err, f"error: {tmp_path}: is a folder, not a mesh file")
+
+
+def _square(tmp_path):
+    """A flat square of two triangles (a disc `flatten` takes)."""
+    path = tmp_path / "square.obj"
+    path.write_text("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3\nf 1 3 4\n")
+    return path
+
+
+def _output_command(kind, tmp_path, out):
+    """How each kind of command is given the output folder `out`: (runner, arguments)."""
+    return {"run": (cli, ["run", scene_file(tmp_path), "--no-progress", "--out", out]),
+            "flatten": (cli, ["flatten", _square(tmp_path), "--out", out / "square.dxf"]),
+            "demo": (demo, ["hanging_cloth", "--frames", "1", "--no-progress", "--out", out])}[kind]
+
+
+@pytest.mark.parametrize("kind", ["run", "flatten", "demo"])
+def test_an_output_folder_below_a_file_is_refused_before_any_work(tmp_path, kind):
+    (tmp_path / "notes.txt").write_text("a file")
+    runner, args = _output_command(kind, tmp_path, tmp_path / "notes.txt" / "sub")
+    rc, out, err = runner(*args)
+    one_clean_error(rc, out, err, f"{tmp_path / 'notes.txt' / 'sub'}", f"lies below the file {tmp_path / 'notes.txt'}")
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="root writes into a read-only folder: chmod does not bite")
+@pytest.mark.parametrize("kind", ["run", "flatten", "demo"])
+def test_a_read_only_output_folder_is_refused_before_any_work(tmp_path, kind):
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    locked.chmod(0o555)
+    try:
+        runner, args = _output_command(kind, tmp_path, locked)
+        rc, out, err = runner(*args)
+    finally:
+        locked.chmod(0o755)
+    one_clean_error(rc, out, err, str(locked), "read-only folder (permission denied)")
+    assert not any(locked.iterdir())
+
+
 def test_a_full_disk_is_one_line_naming_the_file(monkeypatch, capsys):
     """A file-system error in the middle of a command (here a full disk while a run writes its recording: write()
     names no file) ends as one line naming the file the run was writing and the reason, exit 2."""
