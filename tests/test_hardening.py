@@ -222,10 +222,11 @@ def _output_command(kind, tmp_path, out):
     """How each kind of command is given the output folder `out`: (runner, arguments)."""
     return {"run": (cli, ["run", scene_file(tmp_path), "--no-progress", "--out", out]),
             "flatten": (cli, ["flatten", _square(tmp_path), "--out", out / "square.dxf"]),
+            "bench": (cli, ["bench", "--sizes", "4", "--integrators", "explicit", "--garment", "none", "--out", out]),
             "demo": (demo, ["hanging_cloth", "--frames", "1", "--no-progress", "--out", out])}[kind]
 
 
-@pytest.mark.parametrize("kind", ["run", "flatten", "demo"])
+@pytest.mark.parametrize("kind", ["run", "flatten", "bench", "demo"])
 def test_an_output_folder_below_a_file_is_refused_before_any_work(tmp_path, kind):
     (tmp_path / "notes.txt").write_text("a file")
     runner, args = _output_command(kind, tmp_path, tmp_path / "notes.txt" / "sub")
@@ -234,7 +235,7 @@ def test_an_output_folder_below_a_file_is_refused_before_any_work(tmp_path, kind
 
 
 @pytest.mark.skipif(os.geteuid() == 0, reason="root writes into a read-only folder: chmod does not bite")
-@pytest.mark.parametrize("kind", ["run", "flatten", "demo"])
+@pytest.mark.parametrize("kind", ["run", "flatten", "bench", "demo"])
 def test_a_read_only_output_folder_is_refused_before_any_work(tmp_path, kind):
     locked = tmp_path / "locked"
     locked.mkdir()
@@ -268,6 +269,28 @@ def test_a_full_disk_is_one_line_naming_the_file(monkeypatch, capsys):
 
     assert cli_module.ends(read_only) == 2
     assert capsys.readouterr().err.splitlines() == ["error: out/t.obj: read-only file system"]
+
+
+# ------------------------------------------------------------------------------------------------ bench arguments
+@pytest.mark.parametrize("args, words", [
+    (["--integrators", "explicit", "rk4"], "--integrators: unknown integrator 'rk4'; choose from explicit, verlet"),
+    (["--sizes", "32", "1"], "--sizes: every n must be >= 4 (n x n particles), got 32 1"),
+    (["--material", "wool"], "--material: unknown material 'wool'; choose from silk, cotton"),
+    (["--garment", "missing.toml"], "--garment missing.toml: no such scene file"),
+    (["collision", "--steps", "0"], "--steps must be >= 1 (the steps replayed), got 0"),
+])
+def test_bench_refuses_bad_arguments_before_it_starts(tmp_path, args, words):
+    suite = ["collision"] if args[0] == "collision" else []
+    rc, out, err = cli("bench", *suite, *args[len(suite):], "--out", tmp_path / "bench", cwd=tmp_path)
+    one_clean_error(rc, out, err, words)
+    assert not (tmp_path / "bench").exists()  # refused before the output folder was made
+
+
+@pytest.mark.parametrize("args, words", [(["tradeoff", "--variants", "rk4"], "unknown variant 'rk4'"),
+                                         (["peers", "--sizes", "2"], "--sizes: every n must be >= 4")])
+def test_every_bench_error_goes_to_stderr(tmp_path, args, words):
+    rc, out, err = cli("bench", *args, "--out", tmp_path / "bench")
+    one_clean_error(rc, out, err, words)
 
 
 # ------------------------------------------------------------------------------------------------ Ctrl-C
