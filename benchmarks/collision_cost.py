@@ -13,13 +13,14 @@ ratio candidates / fuzzy tests, and the integrator's ms per step on the same sce
 """
 from __future__ import annotations
 
+import math
 import statistics
 import time
 from pathlib import Path
 
 import taichi as ti
 
-from benchmarks import write_csv
+from benchmarks import MIN_SIZE, output_folder, require, write_csv
 from collision import MeshCollider
 from taichi_cloth import runtime
 from taichi_cloth.builder import ClothBuilder
@@ -79,10 +80,21 @@ def _replay(collider, scene, frames) -> tuple[float, dict]:
     return statistics.median(per[1:] or per), collider.counter_values()
 
 
+def check(args) -> None:
+    """The arguments, before Taichi starts: TaichiClothError (one `error:` line) for a grid under MIN_SIZE, --steps
+    under 1, a negative --settle or a cell size that is not positive."""
+    require(all(n >= MIN_SIZE for n in args.sizes), f"--sizes: every n must be >= {MIN_SIZE} (n x n particles), "
+                                                    f"got {' '.join(map(str, args.sizes))}")
+    require(args.steps >= 1, f"--steps must be >= 1 (the steps replayed), got {args.steps}")
+    require(math.isfinite(args.settle) and args.settle >= 0, f"--settle must be >= 0 s, got {args.settle}")
+    require(all(math.isfinite(c) and c > 0 for c in args.cells), f"--cells: every cell size must be > 0, got "
+                                                                 f"{' '.join(map(str, args.cells))}")
+
+
 def run(args) -> int:
+    check(args)
+    out = output_folder(args.out)
     runtime.init(args.arch)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
     rows = []
     for n in args.sizes:
         t0 = time.perf_counter()

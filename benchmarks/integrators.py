@@ -22,16 +22,17 @@ from pathlib import Path
 import taichi as ti
 from taichi.lang import impl
 
-from benchmarks import write_csv
+from benchmarks import MIN_SIZE, output_folder, require, write_csv
 from taichi_cloth import runtime
 from taichi_cloth.builder import ClothBuilder
 from taichi_cloth.errors import BlowUpError
 from taichi_cloth.frame import scene_layout, scene_snapshot
 from taichi_cloth.integrators import INTEGRATORS
 from taichi_cloth.integrators.implicit import Implicit
+from taichi_cloth.material import MATERIALS
 from taichi_cloth.multilevel_cloth import multilevel_grid
 from taichi_cloth.scene import Scene
-from taichi_cloth.scenefile import load_scene
+from taichi_cloth.scenefile import load_scene, parse_scene
 
 FRAME_DT = 1.0 / 60.0
 #: the garment timed by default: the T-shirt demo's scene, where the project's demos are beside the package
@@ -206,11 +207,26 @@ def _scenes(args, names):
             yield label, round(scene.model.data.n_particles ** 0.5), scene
 
 
+def check(args) -> None:
+    """The arguments, before Taichi starts: TaichiClothError (one `error:` line) for a grid under MIN_SIZE, an
+    unknown integrator or material, --steps under 1, a garment scene file that is missing or malformed."""
+    require(all(n >= MIN_SIZE for n in args.sizes), f"--sizes: every n must be >= {MIN_SIZE} (n x n particles), "
+                                                    f"got {' '.join(map(str, args.sizes))}")
+    for name in args.integrators or []:
+        require(name in INTEGRATORS, f"--integrators: unknown integrator {name!r}; choose from "
+                                     f"{', '.join(INTEGRATORS)}")
+    require(args.material in MATERIALS, f"--material: unknown material {args.material!r}; choose from "
+                                        f"{', '.join(MATERIALS)}")
+    require(args.steps >= 1, f"--steps must be >= 1, got {args.steps}")
+    if args.garment != "none" and "implicit" in (args.integrators or INTEGRATORS):
+        parse_scene(Path(args.garment), label=f"--garment {args.garment}")  # SceneError: missing, a folder, bad
+
+
 def run(args) -> int:
+    check(args)
+    out = output_folder(args.out)
     runtime.init(args.arch, kernel_profiler=args.kernel_shares)
     names = args.integrators or list(INTEGRATORS)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
     if args.kernel_shares:
         _kernel_table(_scenes(args, names), args.steps, out)
         return 0

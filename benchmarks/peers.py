@@ -58,6 +58,7 @@ import taichi as ti
 from taichi_cloth import runtime
 from taichi_cloth.errors import BlowUpError
 
+from . import MIN_SIZE, output_folder, require
 from . import write_csv as write_rows
 from . import peer_warp
 from .accuracy import Trajectory, compare, pareto_front, run_sampled
@@ -433,17 +434,19 @@ def plot(rows: list[dict], infos: dict, path: Path) -> Path | None:
 
 
 # ---------------------------------------------------------------------------------------------- entry point
+def check(args) -> None:
+    """The arguments, before any work: TaichiClothError (one `error:` line on stderr) for a grid under MIN_SIZE, a
+    --sim-time, --ref-dt or --samples out of range, a reference step that does not fit the sample spacing."""
+    require(all(n >= MIN_SIZE for n in args.sizes), f"--sizes: every n must be >= {MIN_SIZE}")
+    require(args.sim_time > 0 and args.samples >= 1 and args.ref_dt > 0,
+            "--sim-time and --ref-dt must be > 0 and --samples >= 1")
+    require(args.ref_dt * 4 <= args.sim_time / args.samples,
+            f"--ref-dt: 4 x {args.ref_dt:g} s must fit in the sample spacing {args.sim_time / args.samples:g} s")
+
+
 def run(args) -> int:
-    if not args.sizes or min(args.sizes) < 4:
-        print("error: --sizes: every n must be >= 4")
-        return 2
-    if not args.sim_time > 0 or args.samples < 1 or not args.ref_dt > 0:
-        print("error: --sim-time and --ref-dt must be > 0 and --samples >= 1")
-        return 2
-    if args.ref_dt * 4 > args.sim_time / args.samples:
-        print(f"error: --ref-dt: 4 x {args.ref_dt:g} s must fit in the sample spacing "
-              f"{args.sim_time / args.samples:g} s")
-        return 2
+    check(args)
+    out = output_folder(args.out)
 
     skipped = []
     if args.no_warp:
@@ -457,9 +460,6 @@ def run(args) -> int:
         for line in skipped:
             print(f"skipped: {line}")
     runtime.init(args.arch)
-
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
     t_start = time.perf_counter()
 
     def log(row):

@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks import write_csv
+from benchmarks import output_folder, write_csv
 from taichi_cloth import runtime
 from taichi_cloth.adaptive import AdaptiveOptions
 from taichi_cloth.adaptive import frame_steps, step_cap
@@ -144,10 +144,9 @@ def run(args) -> int:
     if problem:
         print(f"error: {problem}", file=sys.stderr)
         return 2
+    out = output_folder(args.out)
     runtime.init(args.arch)
     names = args.integrators or list(INTEGRATORS)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(args.seed)
     cells, bounds = [], []
     t_start = time.perf_counter()

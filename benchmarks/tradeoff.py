@@ -50,6 +50,7 @@ from taichi_cloth.integrators import integrator_class
 from taichi_cloth.quality import PRESETS_PATH
 from taichi_cloth.study_scenes import SCENES, StudyScene, energy_scale
 
+from . import output_folder, require
 from . import write_csv as write_rows
 from .accuracy import Trajectory, compare, pareto_front, run_sampled, sample_errors
 
@@ -493,17 +494,22 @@ def add_arguments(p) -> None:
     p.add_argument("--out", default="out/bench/tradeoff", help="folder for the table, plot, recording and presets")
 
 
+def check(args) -> None:
+    """The arguments, before any work: TaichiClothError (one `error:` line on stderr) for an unknown variant, a
+    --base, --levels, --samples, --sim-time or --ref-dt out of range, a level or step that cannot be run."""
+    for v in args.variants:
+        require(v in VARIANTS, f"unknown variant {v!r}; choose from {', '.join(VARIANTS)}")
+    require(args.base >= 1 and args.levels >= 1 and args.sim_time > 0 and args.samples >= 1 and args.ref_dt > 0,
+            "--base, --levels and --samples must be >= 1; --sim-time and --ref-dt > 0")
+    require(all(0 <= b < args.levels for b in args.levels_below),
+            f"--levels-below: every value must lie in 0..{args.levels - 1} (levels counted down from the finest)")
+    require(all(h > 0 for h in args.dt) and all(f > 0 for f in args.fractions), "--dt and --fractions must be > 0")
+
+
 def run(args) -> int:
-    unknown = [v for v in args.variants if v not in VARIANTS]
-    if unknown:
-        print(f"error: unknown variant {unknown[0]!r}; choose from {', '.join(VARIANTS)}")
-        return 2
-    if args.base < 1 or args.levels < 1 or args.sim_time <= 0 or args.samples < 1 or args.ref_dt <= 0:
-        print("error: --base, --levels and --samples must be >= 1; --sim-time and --ref-dt > 0")
-        return 2
+    check(args)
+    out = output_folder(args.out)
     runtime.init(args.arch)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     study = run_study(args.scenes, args.variants, args.levels_below, args.base, args.levels, args.sim_time,
                       args.samples, args.ref_dt, tuple(args.dt), tuple(args.fractions), cache=out,

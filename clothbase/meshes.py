@@ -182,6 +182,8 @@ def load_triangle_mesh(path: str | Path, scale: float = 1.0, translate=(0.0, 0.0
     import trimesh  # 0.7 s to import: only when a mesh file is read
 
     path = Path(path)
+    if path.is_dir():
+        raise MeshError(f"{path}: is a folder, not a mesh file")
     if not path.is_file():
         raise MeshError(f"{path}: no such mesh file")
     if path.suffix.lower() == ".dxf":

@@ -23,6 +23,7 @@ def main(argv=None) -> int:
     import taichi_cloth as tc
     from taichi_cloth.cli import rerun_command
     from taichi_cloth.integrators import INTEGRATORS
+    from taichi_cloth.paths import check_output_folder
     from taichi_cloth.run import load_scene_file
 
     p = argparse.ArgumentParser(description=__doc__.strip().splitlines()[0])
@@ -33,31 +34,27 @@ def main(argv=None) -> int:
     p.add_argument("--arch", default="cpu", choices=("cpu", "gpu"))
     p.add_argument("--no-progress", action="store_true")
     args = p.parse_args(argv)
-    try:
-        out = Path(args.out)
-        rows, finals = [], {}
-        with tc.Recorder(out / "integrator_lineup.rrd", recording_name="integrator line-up") as rec:
-            for k, name in enumerate(args.integrator):
-                cls = INTEGRATORS[name]
-                overrides = argparse.Namespace(integrator=name, frames=args.frames, arch=args.arch,
-                                               dt=args.dt if cls.unconditionally_stable else None)
-                loaded = load_scene_file(SCENE, overrides)
-                scene = loaded.scene
-                if scene.stable_dt is not None:
-                    scene.dt = 0.9 * scene.stable_dt
-                try:
-                    summary = scene.run(loaded.frames, recorder=rec, entity=f"lineup/{name}",
-                                        translation=(1.0 * k, 0.0, 0.0), progress=not args.no_progress)
-                except tc.BlowUpError as err:
-                    print(f"{name}: {err}", file=sys.stderr)
-                    continue
-                print(summary.format())
-                finals[name] = scene.positions()
-                rows.append((name, scene.dt, summary.steps, summary.wall_step + summary.first_frame_wall,
-                             summary.final.max_strain))
-    except (tc.SceneError, tc.MeshError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+    out = check_output_folder(args.out)  # a folder that cannot be written: refused before any work
+    rows, finals = [], {}
+    with tc.Recorder(out / "integrator_lineup.rrd", recording_name="integrator line-up") as rec:
+        for k, name in enumerate(args.integrator):
+            cls = INTEGRATORS[name]
+            overrides = argparse.Namespace(integrator=name, frames=args.frames, arch=args.arch,
+                                           dt=args.dt if cls.unconditionally_stable else None)
+            loaded = load_scene_file(SCENE, overrides)
+            scene = loaded.scene
+            if scene.stable_dt is not None:
+                scene.dt = 0.9 * scene.stable_dt
+            try:
+                summary = scene.run(loaded.frames, recorder=rec, entity=f"lineup/{name}",
+                                    translation=(1.0 * k, 0.0, 0.0), progress=not args.no_progress)
+            except tc.BlowUpError as err:
+                print(f"{name}: {err}", file=sys.stderr)
+                continue
+            print(summary.format())
+            finals[name] = scene.positions()
+            rows.append((name, scene.dt, summary.steps, summary.wall_step + summary.first_frame_wall,
+                         summary.final.max_strain))
     ref = finals.get("implicit")
     print("\n| integrator | dt [s] | steps | wall [s] | max strain | max distance to implicit [mm] |")
     print("|---|---|---|---|---|---|")
@@ -69,4 +66,6 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from _common import ends  # the demos' end: an error or Ctrl-C as one line (taichi_cloth.cli.ends)
+
+    sys.exit(ends(main))

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import errno
 import importlib
 import os
 import shutil
@@ -16,18 +17,20 @@ from clothbase.meshes import load_triangle_mesh
 
 from . import runtime
 from .body import cli as body_cli
-from .errors import BlowUpError, MeshError, PatternError, SceneError
+from .errors import BlowUpError, MeshError, PatternError, TaichiClothError
 from .flatten import flatten_pieces, format_table, plot_flat, write_flat_dxf
 from .garment.pattern import unit_scale
 from .guards import MAX_STEPS
 from .integrators import INTEGRATORS
 from .material import MATERIALS
+from .paths import check_output_folder
 from .garment.garment import RESOLUTIONS
 from .quality import QUALITIES
 from .run import run_scene_file as run_and_record
 
 EXIT_BAD_INPUT = 2
 EXIT_BLOWUP = 3
+EXIT_INTERRUPTED = 130  # 128 + SIGINT: what a shell reports for a command stopped by Ctrl-C
 
 
 def add_run_arguments(p: argparse.ArgumentParser, frames_default=None) -> None:
@@ -85,18 +88,74 @@ def rerun_command() -> str:
         return str(beside)
 
 
-def _cmd_run(args) -> int:
+def ends(call, out=None) -> int:
+    """Run `call()` (a command, or a demo's main) and return its exit code; what a user can cause ends it with one
+    line on stderr and an exit code instead, never a traceback, and nothing already written is deleted:
+
+    - bad input (TaichiClothError, MeshError): `error: <message>`, EXIT_BAD_INPUT;
+    - a file or folder that cannot be read or written (OSError: a read-only folder, a full disk):
+      `error: <path>: <reason>`, EXIT_BAD_INPUT;
+    - a run that blew up (BlowUpError): its summary on stdout, then `error: <message>; what was recorded is kept`,
+      EXIT_BLOWUP;
+    - Ctrl-C (KeyboardInterrupt): `interrupted: ... kept what was written to <path>`, EXIT_INTERRUPTED.
+
+    The path named is the exception's own (OSError.filename), else its `.output` (the recording a run was writing:
+    taichi_cloth.run.run_scene_file, Recorder), else `out` (the command's output folder or file, when it exists)."""
     try:
-        run_scene_file(args.scene, args)
-    except (SceneError, MeshError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return EXIT_BAD_INPUT
+        return call()
     except BlowUpError as exc:
         summary = getattr(exc, "summary", None)
         if summary is not None:
             print(summary.format())
-        print(f"error: {exc}; what was recorded is kept", file=sys.stderr)
-        return EXIT_BLOWUP
+        return _say(f"error: {exc}; what was recorded is kept", EXIT_BLOWUP)
+    except (TaichiClothError, MeshError) as exc:
+        return _say(f"error: {exc}", EXIT_BAD_INPUT)
+    except BrokenPipeError:  # the reader went away (`... | head`): nothing left to say to it
+        sys.stdout = open(os.devnull, "w")  # noqa: SIM115 (so that the exit flush does not fail again)
+        return 0
+    except OSError as exc:
+        return _say(f"error: {os_error_text(exc, _written(exc, out))}", EXIT_BAD_INPUT)
+    except KeyboardInterrupt as exc:
+        kept = _written(exc, out)
+        return _say("interrupted: stopped by Ctrl-C" + (f"; kept what was written to {kept}" if kept else ""),
+                    EXIT_INTERRUPTED)
+
+
+#: the reasons of the file-system errors whose system wording misleads here (mkdir's "File exists" for a file in
+#: the way), by errno; the others keep the system's own (e.g. "Permission denied", "No space left on device")
+REASONS = {errno.EEXIST: "is a file, not a folder", errno.ENOTDIR: "a part of the path is a file, not a folder",
+           errno.EISDIR: "is a folder, not a file"}
+
+
+def os_error_text(exc: OSError, where=None) -> str:
+    """`<path>: <reason>` of a file-system error: the path is the exception's (both, for a rename or copy), else
+    `where`; the reason in words (REASONS, or the system's text), e.g. `out/t.rrd: no space left on device`."""
+    path = exc.filename if exc.filename is not None else where
+    if exc.filename2 is not None:
+        path = f"{path} -> {exc.filename2}"
+    reason = exc.strerror or str(exc) or type(exc).__name__
+    if exc.errno in REASONS and reason == os.strerror(exc.errno):
+        reason = REASONS[exc.errno]
+    reason = reason[:1].lower() + reason[1:]
+    return f"{path}: {reason}" if path is not None else reason
+
+
+def _written(exc: BaseException, out) -> str | None:
+    """The path to name for what a failed or interrupted command kept: the exception's `.output`, else `out` when it
+    exists."""
+    output = getattr(exc, "output", None)
+    if output is not None:
+        return str(output)
+    return str(out) if out is not None and Path(out).exists() else None
+
+
+def _say(line: str, code: int) -> int:
+    print(line, file=sys.stderr)
+    return code
+
+
+def _cmd_run(args) -> int:
+    run_scene_file(args.scene, args)
     return 0
 
 
@@ -106,6 +165,7 @@ def _cmd_flatten(args) -> int:
     if out.suffix.lower() != ".dxf":
         print(f"error: --out must name a .dxf file, got {out}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    check_output_folder(out.parent)  # before the flattening: an OSError naming the folder when it cannot be one
     try:
         scale = unit_scale(args.units)
         pieces = [(Path(m).stem, *load_triangle_mesh(m, scale=scale), None) for m in args.meshes]
@@ -172,8 +232,4 @@ def main(argv=None) -> int:
         if len(argv) == 1 or argv[1] not in (*SUITES, "-h", "--help"):
             argv.insert(1, "integrators")  # `bench` alone is the integrator benchmark
     args = parser.parse_args(argv)
-    try:
-        return args.func(args)
-    except BrokenPipeError:  # the reader went away (`... | head`): nothing left to say to it
-        sys.stdout = open(os.devnull, "w")  # noqa: SIM115 (so that the exit flush does not fail again)
-        return 0
+    return ends(lambda: args.func(args), getattr(args, "out", None))

@@ -175,6 +175,8 @@ class Recorder:
         self._colliders: dict[str, list] = {}  # entity -> the entity path of each collider
         self._shown: dict[str, _Shown] = {}  # entity -> what the blueprint frames and plots
         self._framed = None  # the box [m] (lo, hi) the blueprint sent last frames
+        # an OSError naming the file when it cannot be written (rerun's save says so only in a RuntimeError's text)
+        open(self.path, "wb").close()
         self.stream = rr.RecordingStream(application_id)
         self.stream.save(str(self.path))
         if recording_name:
@@ -485,5 +487,7 @@ class Recorder:
     def __enter__(self) -> "Recorder":
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, kind, exc, traceback) -> None:
         self.close()
+        if exc is not None and getattr(exc, "output", None) is None:
+            exc.output = str(self.path)  # what the command line names as kept (taichi_cloth.cli.ends)

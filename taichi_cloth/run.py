@@ -50,7 +50,8 @@ def run_scene_file(source: str | Path | dict, args: argparse.Namespace, quiet: b
     the summary's outputs.
 
     Returns (summary, loaded scene). Raises SceneError/MeshError for bad input and BlowUpError (with .summary)
-    when the run goes unstable; the recording made so far is kept, with the mesh of the last good state."""
+    when the run goes unstable; the recording made so far is kept, with the mesh of the last good state. Any other
+    exception (KeyboardInterrupt, OSError) propagates with the recording closed, its path as `.output`."""
     loaded = load_scene_file(source, args, base_dir)
     scene, out = loaded.scene, Path(loaded.output["dir"])
     png = getattr(args, "png", False)
@@ -71,6 +72,10 @@ def run_scene_file(source: str | Path | dict, args: argparse.Namespace, quiet: b
                             record_every=loaded.output["record_every"])
     except BlowUpError as err:
         summary = getattr(err, "summary", None)
+        raise
+    except BaseException as err:  # Ctrl-C, a full disk...: the recording made so far is kept (closed below)
+        if rec is not None and getattr(err, "output", None) is None:
+            err.output = str(rec.path)  # what the command line names as kept (taichi_cloth.cli.ends)
         raise
     finally:
         if rec is not None:

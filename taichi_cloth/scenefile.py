@@ -93,6 +93,7 @@ from .garment.garmentfile import load_garment
 from .garment.levels import multilevel_garment
 from .guards import check_memory, check_precision, grid_particles
 from .integrators import INTEGRATORS
+from .paths import check_output_folder
 from .quality import QUALITIES, coarsen_resolution, preset
 from .scene import Scene
 from .schema import MATERIAL_TABLE, Array, Field, Table, Validator, at_least, material_of, nonneg, positive, read_toml
@@ -455,11 +456,9 @@ def load_scene(source: str | Path | dict, *, frames: int | None = None, integrat
 
 
 def check_output_dir(path: str | Path, label: str) -> None:
-    """Refuse (SceneError) an output folder that cannot be one: a file, or below a file."""
-    p = Path(path)
-    for q in (p, *p.parents):
-        if q.exists():
-            if not q.is_dir():
-                where = "is a file" if q == p else f"lies below the file {q}"
-                raise SceneError(f"{label}: [output] dir {str(path)!r} {where}, not a folder")
-            return
+    """Refuse (SceneError) an output folder that cannot be one before the scene is built: a file, below a file, or
+    read-only (taichi_cloth.paths.check_output_folder)."""
+    try:
+        check_output_folder(path)
+    except OSError as exc:
+        raise SceneError(f"{label}: [output] dir {str(path)!r} {exc.strerror}") from None

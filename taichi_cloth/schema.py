@@ -182,7 +182,9 @@ class Validator:
 
 def read_toml(path: Path, label: str, what: str, error=SceneError) -> dict:
     """The TOML file at `path` as a dict, its `name` defaulting to the file's stem; `error` (naming `label`)
-    if it is missing, not TOML or not UTF-8 text. `what` says which kind of file ("scene", "garment")."""
+    if it is missing, a folder, not TOML or not UTF-8 text. `what` says which kind of file ("scene", "garment")."""
+    if path.is_dir():
+        raise error(f"{label}: is a folder, not a {what} file")
     if not path.is_file():
         raise error(f"{label}: no such {what} file")
     try:

@@ -1,8 +1,12 @@
 """Bad input as a user gives it: each kind gets one `error:` line (exit 2) or one `warning:` line, never a traceback
-or a crash. The CLI cases run `python -m taichi_cloth` in a subprocess."""
+or a crash; Ctrl-C ends a command with one `interrupted:` line (exit 130) and keeps what was written. The CLI cases
+run `python -m taichi_cloth` (or a demo script) in a subprocess."""
+import errno
 import os
+import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import ezdxf
@@ -53,12 +57,28 @@ def cli(*args, cwd=None, timeout=300):
     return done.returncode, done.stdout, err
 
 
+def demo(name, *args, timeout=300):
+    """cli's (exit code, stdout, stderr lines) of the demo script demos/NAME.py."""
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    done = subprocess.run([sys.executable, str(ROOT / "demos" / f"{name}.py"), *map(str, args)], capture_output=True,
+                          text=True, cwd=ROOT, env=env, timeout=timeout)
+    noise = ("[Taichi]", "[W ", "[I ")
+    return done.returncode, done.stdout, [line for line in done.stderr.splitlines()
+                                          if line.strip() and not line.startswith(noise)]
+
+
 def one_error(rc, err, *words):
     assert rc == 2, err
     assert len(err) == 1 and err[0].startswith("error: "), err
     for w in words:
         assert w in err[0], err[0]
     return err[0]
+
+
+def one_clean_error(rc, out, err, *words):
+    """one_error, and nothing on stdout that belongs on stderr (an `error:` line, a traceback)."""
+    assert "Traceback" not in out and "error:" not in out, out
+    return one_error(rc, err, *words)
 
 
 # ------------------------------------------------------------------------------------------------ resources
@@ -182,6 +202,129 @@ def test_an_output_dir_that_is_a_file_is_refused_before_the_scene_is_built(tmp_p
     one_error(rc, err, f"[output] dir '{(tmp_path / 'taken').as_posix()}' is a file, not a folder")
     rc, _, err = cli("run", scene_file(tmp_path, out=(tmp_path / "taken" / "sub").as_posix()), "--no-progress")
     one_error(rc, err, f"lies below the file {tmp_path / 'taken'}")
+
+
+def test_a_scene_or_mesh_path_that_is_a_folder_is_named_as_one(tmp_path):
+    rc, out, err = cli("run", tmp_path, "--no-progress")
+    one_clean_error(rc, out, err, f"error: {tmp_path}: is a folder, not a scene file")
+    rc, out, err = cli("flatten", tmp_path, "--out", tmp_path / "x.dxf")
+    one_clean_error(rc, out, err, f"error: {tmp_path}: is a folder, not a mesh file")
+
+
+def _square(tmp_path):
+    """A flat square of two triangles (a disc `flatten` takes)."""
+    path = tmp_path / "square.obj"
+    path.write_text("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3\nf 1 3 4\n")
+    return path
+
+
+def _output_command(kind, tmp_path, out):
+    """How each kind of command is given the output folder `out`: (runner, arguments)."""
+    return {"run": (cli, ["run", scene_file(tmp_path), "--no-progress", "--out", out]),
+            "flatten": (cli, ["flatten", _square(tmp_path), "--out", out / "square.dxf"]),
+            "bench": (cli, ["bench", "--sizes", "4", "--integrators", "explicit", "--garment", "none", "--out", out]),
+            "demo": (demo, ["hanging_cloth", "--frames", "1", "--no-progress", "--out", out])}[kind]
+
+
+@pytest.mark.parametrize("kind", ["run", "flatten", "bench", "demo"])
+def test_an_output_folder_below_a_file_is_refused_before_any_work(tmp_path, kind):
+    (tmp_path / "notes.txt").write_text("a file")
+    runner, args = _output_command(kind, tmp_path, tmp_path / "notes.txt" / "sub")
+    rc, out, err = runner(*args)
+    one_clean_error(rc, out, err, f"{tmp_path / 'notes.txt' / 'sub'}", f"lies below the file {tmp_path / 'notes.txt'}")
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="root writes into a read-only folder: chmod does not bite")
+@pytest.mark.parametrize("kind", ["run", "flatten", "bench", "demo"])
+def test_a_read_only_output_folder_is_refused_before_any_work(tmp_path, kind):
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    locked.chmod(0o555)
+    try:
+        runner, args = _output_command(kind, tmp_path, locked)
+        rc, out, err = runner(*args)
+    finally:
+        locked.chmod(0o755)
+    one_clean_error(rc, out, err, str(locked), "read-only folder (permission denied)")
+    assert not any(locked.iterdir())
+
+
+def test_a_full_disk_is_one_line_naming_the_file(monkeypatch, capsys):
+    """A file-system error in the middle of a command (here a full disk while a run writes its recording: write()
+    names no file) ends as one line naming the file the run was writing and the reason, exit 2."""
+    from taichi_cloth import cli as cli_module
+
+    def full(*_):
+        exc = OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        exc.output = "out/t.rrd"  # as taichi_cloth.run.run_scene_file marks what it was writing
+        raise exc
+
+    monkeypatch.setattr(cli_module, "run_scene_file", full)
+    assert cli_module.main(["run", "t.toml"]) == 2
+    captured = capsys.readouterr()
+    assert captured.err.splitlines() == ["error: out/t.rrd: no space left on device"] and not captured.out
+
+    def read_only():
+        raise OSError(errno.EROFS, os.strerror(errno.EROFS), "out/t.obj")
+
+    assert cli_module.ends(read_only) == 2
+    assert capsys.readouterr().err.splitlines() == ["error: out/t.obj: read-only file system"]
+
+
+# ------------------------------------------------------------------------------------------------ bench arguments
+@pytest.mark.parametrize("args, words", [
+    (["--integrators", "explicit", "rk4"], "--integrators: unknown integrator 'rk4'; choose from explicit, verlet"),
+    (["--sizes", "32", "1"], "--sizes: every n must be >= 4 (n x n particles), got 32 1"),
+    (["--material", "wool"], "--material: unknown material 'wool'; choose from silk, cotton"),
+    (["--garment", "missing.toml"], "--garment missing.toml: no such scene file"),
+    (["collision", "--steps", "0"], "--steps must be >= 1 (the steps replayed), got 0"),
+])
+def test_bench_refuses_bad_arguments_before_it_starts(tmp_path, args, words):
+    suite = ["collision"] if args[0] == "collision" else []
+    rc, out, err = cli("bench", *suite, *args[len(suite):], "--out", tmp_path / "bench", cwd=tmp_path)
+    one_clean_error(rc, out, err, words)
+    assert not (tmp_path / "bench").exists()  # refused before the output folder was made
+
+
+@pytest.mark.parametrize("args, words", [(["tradeoff", "--variants", "rk4"], "unknown variant 'rk4'"),
+                                         (["peers", "--sizes", "2"], "--sizes: every n must be >= 4")])
+def test_every_bench_error_goes_to_stderr(tmp_path, args, words):
+    rc, out, err = cli("bench", *args, "--out", tmp_path / "bench")
+    one_clean_error(rc, out, err, words)
+
+
+# ------------------------------------------------------------------------------------------------ Ctrl-C
+def test_ctrl_c_ends_a_run_with_one_line_and_keeps_its_recording(tmp_path):
+    """SIGINT while a run records: exit 130, one `interrupted:` line naming the recording, no traceback, and the
+    recording made so far stays on disk and reads back."""
+    import rerun as rr
+
+    path = scene_file(tmp_path, frames=100000)  # 1.7 million steps: minutes, stopped after the first frames
+    path.write_text(path.read_text().replace("record = false", "record = true"))
+    rrd = tmp_path / "out" / "t.rrd"
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    # a terminal's Ctrl-C: SIGINT delivered (a shell starts background jobs with it ignored, and children inherit that)
+    proc = subprocess.Popen([sys.executable, "-m", "taichi_cloth", "run", str(path), "--no-progress", "--yes"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT, env=env,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    try:
+        deadline = time.monotonic() + 120
+        # frames are being written: a recording of this scene holds about 110 kB before its first frame (static
+        # data, and the blueprint written on closing) and 1.5 kB a frame after
+        while time.monotonic() < deadline and proc.poll() is None and not (rrd.exists() and rrd.stat().st_size > 4e5):
+            time.sleep(0.1)
+        assert proc.poll() is None, proc.communicate()
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    assert proc.returncode == 130, err
+    assert "Traceback" not in out + err
+    lines = [line for line in err.splitlines() if line.strip() and not line.startswith(("[Taichi]", "[W ", "[I "))]
+    assert lines == [f"interrupted: stopped by Ctrl-C; kept what was written to {rrd}"]
+    frames = [c for c in rr.chunk.RrdReader(rrd).stream().to_chunks() if c.entity_path == "/cloth/mesh"
+              and not c.is_static]
+    assert frames  # the recording so far, closed and readable
 
 
 # ------------------------------------------------------------------------------------------------ messages
