@@ -55,6 +55,10 @@ def nonneg(v):
     return None if v >= 0 else "must be >= 0"
 
 
+def nonzero(v):
+    return None if any(x != 0 for x in v) else "must be non-zero (a direction)"
+
+
 def at_least(n):
     return lambda v: None if v >= n else f"must be >= {n}"
 
