@@ -17,6 +17,7 @@ out and writes the contact normals the next step's integrator filters (Scene.sub
 """
 from __future__ import annotations
 
+import inspect
 from pathlib import Path
 
 import numpy as np
@@ -29,6 +30,7 @@ from collision.self_collision import SelfCollision
 
 from .contacts import require_bound
 from .control import Controller
+from .guards import check_voxel_grid
 
 DEFAULT_THICKNESS = 0.003  # m
 DEFAULT_FRICTION = 0.3
@@ -45,10 +47,15 @@ def body_mesh(path: str, scale: float = 1.0, translate=(0.0, 0.0, 0.0), base_dir
     return load_triangle_mesh(p, scale, translate)
 
 
+#: [m] the motion per step a mesh collider's voxel grid leaves room for (MeshCollider's max_step)
+MAX_STEP = inspect.signature(MeshCollider).parameters["max_step"].default
+
+
 def build_colliders(specs, base_dir: Path | None = None) -> list:
-    """Collider objects for a list of spec dicts (see the module docstring); objects pass through."""
+    """Collider objects for a list of spec dicts (see the module docstring); objects pass through. A mesh's voxel
+    grid is checked against the machine's memory before it is allocated (guards)."""
     out, groups = [], {}
-    for spec in specs:
+    for k, spec in enumerate(specs):
         if not isinstance(spec, dict):
             out.append(spec)
             continue
@@ -62,7 +69,11 @@ def build_colliders(specs, base_dir: Path | None = None) -> list:
                 v, t = body_mesh(spec["path"], spec.get("scale", 1.0), spec.get("translate", (0.0, 0.0, 0.0)),
                                  base_dir)
             open_mesh_warning(t, str(spec["path"]))
-            out.append(MeshCollider(v, t, thickness=thickness, friction=friction, cell_size=spec.get("cell_size"),
+            cell = spec.get("cell_size")
+            if cell is not None:  # the default (1.5 x the mean edge) bins each triangle into a few cells
+                check_voxel_grid(v, t, cell, thickness, thickness + MAX_STEP, f"[[colliders]] #{k + 1} cell_size "
+                                 f"{cell:g} m (mesh {spec['path']})")
+            out.append(MeshCollider(v, t, thickness=thickness, friction=friction, cell_size=cell,
                                     mode=spec.get("mode", "fuzzy"), repulsion=spec.get("repulsion"),
                                     source=str(spec["path"])))
         elif kind in ("sphere", "capsule", "plane", "standin"):

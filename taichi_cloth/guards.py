@@ -14,6 +14,7 @@ Figures (measured on x86-64 Linux, ti.cpu, 2 cores; they are bounds to refuse by
 """
 from __future__ import annotations
 
+import math
 import os
 
 import numpy as np
@@ -65,30 +66,84 @@ def human_seconds(s: float) -> str:
     return f"{s:.2g} s"
 
 
-def check_memory(n_particles: int, what: str, available: int | None = None) -> None:
-    """Refuse (SceneError) a cloth of `n_particles` whose estimated memory exceeds what the machine has.
-    `what` names the source in the message (e.g. "[cloth.grid] resolution 30000 x 30000")."""
+def check_memory(n_particles: int, what: str, available: int | None = None, error: type[Exception] = SceneError,
+                 advice: str = "use a coarser resolution") -> None:
+    """Refuse (`error`, SceneError by default) a cloth of `n_particles` whose estimated memory exceeds what the
+    machine has. `what` names the source and its key in the message (e.g. "[cloth.grid] resolution 30000 x 30000",
+    "garment 'skirt' spacing 1e-05 m"); `advice` says what to change."""
     need = float(n_particles) * BYTES_PER_PARTICLE
     have = available_memory() if available is None else available
     if need > have:
-        raise SceneError(f"{what}: {n_particles:,} particles need about {human_bytes(need)} of memory (estimate, "
-                         f"{BYTES_PER_PARTICLE // 1024} KiB a particle) and this machine has {human_bytes(have)} "
-                         "available; use a coarser resolution")
+        raise error(f"{what}: {n_particles:,} particles need about {human_bytes(need)} of memory (estimate, "
+                    f"{BYTES_PER_PARTICLE // 1024} KiB a particle) and this machine has {human_bytes(have)} "
+                    f"available; {advice}")
 
 
-def grid_particles(cfg: dict) -> tuple[int, str] | None:
-    """(particles, what) of a parsed scene config's [cloth.grid] or [multilevel] cloth, before anything is built;
-    None for a mesh or garment cloth (its file's size bounds it). A 4-8 level roughly doubles the vertices of the
-    one below it, and a multilevel cloth keeps every level."""
-    grid, ml = cfg["cloth"].get("grid"), cfg.get("multilevel")
-    if ml is not None and grid is not None:
-        nx, ny = ml["base_cells"]
-        return 2 * (nx + 1) * (ny + 1) * 2 ** (ml["levels"] - 1), \
-            f"[multilevel] base_cells {nx} x {ny}, levels {ml['levels']}"
-    if grid is not None and grid.get("resolution") is not None:
-        nu, nv = grid["resolution"]
-        return nu * nv, f"[cloth.grid] resolution {nu} x {nv}"
-    return None
+def multilevel_particles(base_cells, levels: int) -> int:
+    """Particles of a 4-8 hierarchy of `levels` levels over (nx, ny) base cells, every level kept (a multilevel
+    cloth keeps them all): each level roughly doubles the vertices of the one below it."""
+    nx, ny = (int(c) for c in base_cells)
+    return 2 * (nx + 1) * (ny + 1) * 2 ** (int(levels) - 1)
+
+
+def check_grid(resolution, what: str, available: int | None = None) -> None:
+    """The memory guard of a grid cloth of (nu, nv) particles (ClothBuilder.grid calls it before it allocates, and
+    the scene-file reader before Taichi starts)."""
+    nu, nv = (int(r) for r in resolution)
+    check_memory(nu * nv, f"{what} {nu} x {nv}", available)
+
+
+def check_multilevel_grid(base_cells, levels: int, what: str, available: int | None = None) -> None:
+    """The memory guard of a multilevel grid (ClothBuilder.multilevel_grid and the scene-file reader)."""
+    nx, ny = (int(c) for c in base_cells)
+    check_memory(multilevel_particles(base_cells, levels), f"{what} base_cells {nx} x {ny}, levels {levels}",
+                 available, advice="use fewer levels")
+
+
+def sheet_particles(area: float, perimeter: float, spacing: float, levels: int = 1) -> int:
+    """Particles of pattern pieces of total `area` [m^2] and outline `perimeter` [m] meshed at `spacing` [m]: a
+    square lattice inside (area / spacing^2) plus the outline's samples; a hierarchy of several 4-8 levels keeps
+    about as many again below its finest (each level halves the one above)."""
+    finest = area / spacing ** 2 + perimeter / spacing
+    return int(math.ceil(finest * (2.0 if levels > 1 else 1.0)))
+
+
+#: [bytes] of a dense voxel grid (collision.grid.VoxelGrid): two i32 counts per cell, one i32 per (triangle, cell)
+#: pair with room to grow by its factor 1.25 in extent (1.25^2 in pairs)
+BYTES_PER_VOXEL = 8
+BYTES_PER_VOXEL_PAIR = 4 * 1.25 ** 2
+#: a field of more entries than this cannot be indexed by Taichi's 32-bit indices
+MAX_FIELD_ENTRIES = 2 ** 31 - 1
+
+
+def voxel_grid_size(vertices: np.ndarray, triangles: np.ndarray, cell_size: float, pad: float,
+                    margin: float) -> tuple[float, float]:
+    """(cells, triangle-cell pairs) of the dense voxel grid a mesh collider builds over a body (the formulas of
+    collision.grid.VoxelGrid: its box grown by 1.25 plus 2 cells per axis, each triangle's box widened by `pad`
+    [m]), as floats: a tiny cell can make them too large for an integer."""
+    v = np.asarray(vertices, dtype=np.float64)
+    t = np.asarray(triangles, dtype=np.int64)
+    extent = v.max(0) - v.min(0) + 2 * margin
+    cells = float(np.prod(np.ceil(1.25 * extent / cell_size) + 2))
+    lo, hi = v[t].min(1) - pad, v[t].max(1) + pad
+    pairs = float(np.sum(np.prod(np.floor(hi / cell_size) - np.floor(lo / cell_size) + 1, axis=1)))
+    return cells, pairs
+
+
+def check_voxel_grid(vertices, triangles, cell_size: float, pad: float, margin: float, what: str,
+                     available: int | None = None) -> None:
+    """Refuse (SceneError) a collider voxel grid whose cells or pairs outgrow the machine's memory or Taichi's
+    32-bit field indices, before it is allocated. `what` names the collider and its cell_size key."""
+    cells, pairs = voxel_grid_size(vertices, triangles, cell_size, pad, margin)
+    need = cells * BYTES_PER_VOXEL + pairs * BYTES_PER_VOXEL_PAIR
+    have = available_memory() if available is None else available
+    grid = f"a voxel grid of {cells:,.0f} cells and {pairs:,.0f} triangle-cell pairs"
+    if need > have:
+        raise SceneError(f"{what}: {grid} needs about {human_bytes(need)} of memory (estimate) and this machine has "
+                         f"{human_bytes(have)} available; use a larger cell_size (or none: 1.5 x the mean edge)")
+    if max(cells, pairs) > MAX_FIELD_ENTRIES:
+        raise SceneError(f"{what}: {grid} is more than Taichi's 32-bit indices address ({MAX_FIELD_ENTRIES:,}); "
+                         "use a larger cell_size (or none: 1.5 x the mean edge)")
 
 
 def run_steps(scene, frames: int) -> int | None:

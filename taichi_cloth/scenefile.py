@@ -91,7 +91,7 @@ from .errors import BodyError, MeshError, PatternError, SceneError
 from .garment.garment import RESOLUTIONS, build_garment
 from .garment.garmentfile import load_garment
 from .garment.levels import multilevel_garment
-from .guards import check_memory, check_precision, grid_particles
+from .guards import check_grid, check_multilevel_grid, check_precision
 from .integrators import INTEGRATORS
 from .quality import QUALITIES, coarsen_resolution, preset
 from .scene import Scene
@@ -246,9 +246,11 @@ def parse_scene(source: str | Path | dict, base_dir: Path | None = None, label: 
             v.fail("[body]", f"names no girth: give at least one of {', '.join(BODY_GIRTHS)} [m]")
         if not any(c["type"] == "mesh" and c.get("path") == "mannequin" for c in cfg["colliders"]):
             v.fail("[body]", "morphs the mannequin: add [[colliders]] type = \"mesh\", path = \"mannequin\"")
-    size = grid_particles(cfg)
-    if size is not None:
-        check_memory(size[0], f"{label}: {size[1]}")  # before numpy or Taichi allocates any of it
+    # the builder's memory guard, before Taichi starts (the builder checks again what it is asked to build)
+    if ml is not None and grid is not None:
+        check_multilevel_grid(ml["base_cells"], ml["levels"], f"{label}: [multilevel]")
+    elif grid is not None:
+        check_grid(grid["resolution"], f"{label}: [cloth.grid] resolution")
     return cfg
 
 

@@ -1,6 +1,7 @@
 """Bad input as a user gives it: each kind gets one `error:` line (exit 2) or one `warning:` line, never a traceback
 or a crash. The CLI cases run `python -m taichi_cloth` in a subprocess."""
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -73,6 +74,49 @@ def test_memory_guard_against_a_given_machine():
     guards.check_memory(1000, "x", available=1000 * guards.BYTES_PER_PARTICLE)  # fits exactly
     with pytest.raises(SceneError, match=r"^x: 1,001 particles need about 5.87 MiB .* this machine has 5.86 MiB"):
         guards.check_memory(1001, "x", available=1000 * guards.BYTES_PER_PARTICLE)
+
+
+def test_a_garment_spacing_the_machine_cannot_mesh_is_refused_before_meshing(tmp_path):
+    """A tiny garment spacing means billions of particles: refused before the pieces are meshed (or the body is
+    analysed), naming the garment, the spacing and the estimate; from a scene file, with the garment file's name."""
+    import taichi_cloth as tc
+    from taichi_cloth.errors import PatternError
+    from taichi_cloth.garment.garment import build_garment
+    from taichi_cloth.garment.garmentfile import load_garment
+
+    spec = load_garment(ROOT / "demos/garments/tshirt.toml")
+    assert guards.sheet_particles(sum(p.area() for p in spec.pieces), sum(p.perimeter() for p in spec.pieces),
+                                  0.01) == pytest.approx(5541, rel=0.1)  # the 1 cm T-shirt's pieces: 5,541
+    spec.spacing = 1e-5
+    with pytest.raises(PatternError, match=r"^garment 'tshirt': spacing 1e-05 m: 5,244,\d{3},\d{3} particles need "
+                                           r"about 29.3 TiB of memory \(estimate.*; use a larger spacing"):
+        build_garment(spec)
+    garment = (ROOT / "demos/garments/tshirt.toml").read_text().replace("spacing = 2.0", "spacing = 0.001")
+    assert garment != (ROOT / "demos/garments/tshirt.toml").read_text()
+    (tmp_path / "tiny.toml").write_text(garment)
+    scene = (ROOT / "demos/scenes/sew_tshirt.toml").read_text().replace("../garments/tshirt.toml", "tiny.toml")
+    (tmp_path / "scene.toml").write_text(scene)
+    with pytest.raises(SceneError, match=r"scene.toml: \[cloth\] garment tiny.toml: garment 'tshirt': spacing 1e-05 m"):
+        tc.load_scene(tmp_path / "scene.toml")
+
+
+def test_a_collider_cell_size_the_machine_cannot_hold_is_refused_before_the_grid_is_built(tmp_path):
+    """A tiny voxel over the mannequin is a grid of trillions of cells: refused naming the collider, its cell_size
+    and the estimate, from a scene file and from a dict alike."""
+    import taichi_cloth as tc
+
+    cell = "cell_size 0.0001 m (mesh mannequin): a voxel grid of 2,012,427,431,910 cells and 94,350,409,659 " \
+           "triangle-cell pairs needs about 15.2 TiB of memory (estimate)"
+    path = scene_file(tmp_path, extra='\n[[colliders]]\ntype = "mesh"\npath = "mannequin"\ncell_size = 1e-4\n')
+    with pytest.raises(SceneError, match=rf"scene.toml: \[\[colliders\]\] #1 {re.escape(cell)}"):
+        tc.load_scene(path)
+    with pytest.raises(SceneError, match=rf"^\[\[colliders\]\] #2 {re.escape(cell)}.*; use a larger cell_size"):
+        tc.Scene(tc.ClothBuilder.grid((0.2, 0.2), (4, 4)),
+                 colliders=[{"type": "standin"}, {"type": "mesh", "path": "mannequin", "cell_size": 1e-4}])
+    cells, pairs = guards.voxel_grid_size(np.eye(3), np.array([[0, 1, 2]]), 0.5, 0.0, 0.0)
+    # collision.grid.VoxelGrid's count: ceil(1.25 x 1 m / 0.5 m) + 2 = 5 cells per axis; the triangle's box over
+    # 0..1 m meets cells 0, 1 and 2 (its upper face lies on a cell boundary) per axis
+    assert (cells, pairs) == (5 ** 3, 3 ** 3)
 
 
 def test_a_tiny_step_is_refused_with_its_count_and_time(tmp_path):

@@ -15,6 +15,7 @@ import numpy as np
 from ..body.landmarks import Body
 from ..cloth import ClothData, SpringKind, mesh_cloth
 from ..errors import PatternError
+from ..guards import check_memory, sheet_particles
 from ..material import Material
 from ..material import material as as_material
 from .mesh import level_mesh, mesh_piece
@@ -275,8 +276,14 @@ class GarmentLevelPlan:
 
 def plan_garment_levels(spec: GarmentSpec, body: Body | None = None,
                         seam_stiffness: float | None = None) -> GarmentLevelPlan:
-    """Mesh the pieces of `spec` as hierarchies and plan their seams (see build_garment_levels)."""
+    """Mesh the pieces of `spec` as hierarchies and plan their seams (see build_garment_levels). A spacing that would
+    mesh more particles than the machine has memory for is refused first (PatternError naming the spacing)."""
     spec.validate()
+    check_memory(sheet_particles(sum(p.area() for p in spec.pieces), sum(p.perimeter() for p in spec.pieces),
+                                 spec.spacing, spec.levels),
+                 f"garment {spec.name!r}: spacing {spec.spacing:.3g} m" + (f" ({spec.levels} levels)"
+                                                                         if spec.levels > 1 else ""),
+                 error=PatternError, advice="use a larger spacing (or resolution = \"draft\", \"fit\", \"fine\")")
     mat = as_material(spec.material)
     needs_body = any(not isinstance(p, FreePlacement) for p in spec.placements.values()) or any(
         f.anchor for f in spec.fixed)
