@@ -10,6 +10,8 @@ Spec keys (SI units):
                       "repulsion": None | {"stiffness": N, "distance": m, "max_force": N}}
   {"type": "standin"}: Zhang et al. 2017's sphere-collider body, a sphere-and-capsule stand-in for the mannequin
   every type also takes "thickness" [m] (default 0.003) and "friction" (default 0.3).
+A dict is checked as a scene file's [[colliders]] table is (taichi_cloth.specs): a misspelled or unknown key, a
+missing one, a value of the wrong kind are refused with one SceneError line naming "[[colliders]] #k" and the key.
 Analytic shapes with the same thickness and friction share one PrimitiveColliders (one kernel).
 `Colliders` is the scene's collision stage (and a controller for what it shows, counts and refills): `begin`
 remembers where the particles start a step; `collide`, after the step and the controllers' after_step, pushes them
@@ -31,9 +33,7 @@ from collision.self_collision import SelfCollision
 from .contacts import require_bound
 from .control import Controller
 from .guards import check_voxel_grid
-
-DEFAULT_THICKNESS = 0.003  # m
-DEFAULT_FRICTION = 0.3
+from .specs import collider_table
 
 
 def body_mesh(path: str, scale: float = 1.0, translate=(0.0, 0.0, 0.0), base_dir: Path | None = None):
@@ -52,16 +52,18 @@ MAX_STEP = inspect.signature(MeshCollider).parameters["max_step"].default
 
 
 def build_colliders(specs, base_dir: Path | None = None) -> list:
-    """Collider objects for a list of spec dicts (see the module docstring); objects pass through. A mesh's voxel
-    grid is checked against the machine's memory before it is allocated (guards)."""
+    """Collider objects for a list of spec dicts (see the module docstring); objects pass through. Each dict is
+    checked as a scene file's [[colliders]] table is (taichi_cloth.specs: SceneError naming "[[colliders]] #k" and
+    the key), and a mesh's voxel grid against the machine's memory before it is allocated (guards)."""
     out, groups = [], {}
     for k, spec in enumerate(specs):
         if not isinstance(spec, dict):
             out.append(spec)
             continue
+        where = f"[[colliders]] #{k + 1}"
+        spec = collider_table(spec, where)
         kind = spec["type"]
-        thickness = spec.get("thickness", DEFAULT_THICKNESS)
-        friction = spec.get("friction", DEFAULT_FRICTION)
+        thickness, friction = spec["thickness"], spec["friction"]
         if kind == "mesh":
             if "vertices" in spec:  # a body given as arrays (e.g. a fitted taichi_cloth.body morph)
                 v, t = spec["vertices"], spec["triangles"]
@@ -71,8 +73,8 @@ def build_colliders(specs, base_dir: Path | None = None) -> list:
             open_mesh_warning(t, str(spec["path"]))
             cell = spec.get("cell_size")
             if cell is not None:  # the default (1.5 x the mean edge) bins each triangle into a few cells
-                check_voxel_grid(v, t, cell, thickness, thickness + MAX_STEP, f"[[colliders]] #{k + 1} cell_size "
-                                 f"{cell:g} m (mesh {spec['path']})")
+                check_voxel_grid(v, t, cell, thickness, thickness + MAX_STEP, f"{where} cell_size {cell:g} m "
+                                 f"(mesh {spec['path']})")
             out.append(MeshCollider(v, t, thickness=thickness, friction=friction, cell_size=cell,
                                     mode=spec.get("mode", "fuzzy"), repulsion=spec.get("repulsion"),
                                     source=str(spec["path"])))
