@@ -286,8 +286,10 @@ def build_scene(cfg: dict) -> Scene:
             path = Path(m["path"])
             path = path if path.is_absolute() else cfg["_base_dir"] / path
             data = ClothBuilder.mesh_file(path, mat, m["scale"], m["translate"])
-    except MeshError as exc:
-        raise SceneError(f"{label}: [cloth.mesh] path: {exc}") from None
+    except MeshError as exc:  # a mesh cloth's file, or the body a garment is placed on (the message names it)
+        where = f"[cloth] garment {cloth_cfg['garment']}" if cloth_cfg.get("garment") is not None else \
+            "[cloth.mesh] path"
+        raise SceneError(f"{label}: {where}: {exc}") from None
     except PatternError as exc:
         garment = str(cloth_cfg.get("garment"))
         named = f" {garment}" if cloth_cfg.get("garment") is not None and garment not in str(exc) else ""
@@ -326,7 +328,10 @@ def _body(table: dict, colliders: list, label: str):
         return None, {"weights": fit.weights, "duration": table["morph_time"]}, colliders
     morphed = [dict(c, vertices=fit.vertices, triangles=fit.triangles, path="mannequin (fitted)")
                if c["type"] == "mesh" and c.get("path") == "mannequin" else c for c in colliders]
-    return Body.from_mesh(fit.vertices, fit.triangles), None, morphed
+    try:
+        return Body.from_mesh(fit.vertices, fit.triangles, "the mannequin fitted to its girths"), None, morphed
+    except MeshError as exc:
+        raise SceneError(f"{label}: [body]: {exc}") from None
 
 
 def _sewing(sewing: dict | None, cloth_cfg: dict) -> dict | None:

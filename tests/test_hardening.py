@@ -254,6 +254,27 @@ def test_a_seam_corner_error_names_the_garment_file(tmp_path):
     one_error(rc, err, "[cloth] garment bad.toml: seam 'left side': pattern piece 'front': no corner 'hem_X'")
 
 
+def test_a_body_analysis_error_names_the_garment_and_the_body_file(monkeypatch):
+    """A MeshError from the analysis of the body a garment is placed on names the garment and the body's file (it
+    was reported as the scene's [cloth.mesh] path, which a garment scene does not have)."""
+    import taichi_cloth as tc
+    from collision.mannequin import DEFAULT_PATH
+    from taichi_cloth.body import landmarks
+    from taichi_cloth.errors import MeshError
+
+    def no_armpit(*args):
+        raise MeshError("body mesh: no armpit found below 90% of the height")
+
+    monkeypatch.setattr(landmarks, "_armpit_height", no_armpit)
+    scene = ROOT / "demos/scenes/sew_tshirt.toml"
+    with pytest.raises(SceneError) as err:
+        tc.load_scene(scene)
+    assert str(err.value) == (f"{scene}: [cloth] garment ../garments/tshirt.toml: garment 'tshirt': placing its "
+                              f"pieces on the body {DEFAULT_PATH}: no armpit found below 90% of the height")
+    with pytest.raises(MeshError, match="^body mesh: no armpit"):  # a mesh of no file is still the body mesh
+        landmarks.Body.from_mesh(np.eye(3), np.array([[0, 1, 2], [0, 2, 1]]))
+
+
 # ------------------------------------------------------------------------------------------------ DXF corners
 def test_dxf_corners_of_a_polyline_chained_with_a_spline(tmp_path):
     """side - hem - side as ONE open polyline, the top a spline: the hem corners are polyline vertices (90-degree

@@ -14,7 +14,7 @@ import numpy as np
 
 from ..body.landmarks import Body
 from ..cloth import ClothData, SpringKind, mesh_cloth
-from ..errors import PatternError
+from ..errors import MeshError, PatternError
 from ..guards import check_memory, sheet_particles
 from ..material import Material
 from ..material import material as as_material
@@ -288,7 +288,10 @@ def plan_garment_levels(spec: GarmentSpec, body: Body | None = None,
     needs_body = any(not isinstance(p, FreePlacement) for p in spec.placements.values()) or any(
         f.anchor for f in spec.fixed)
     if body is None and needs_body:
-        body = Body.from_mannequin()
+        try:
+            body = Body.from_mannequin()
+        except MeshError as exc:  # its message names the body's file
+            raise MeshError(f"garment {spec.name!r}: placing its pieces on the {exc}") from None
     pieces = {p.name: p for p in spec.pieces}
     tol = spec.spacing / 200.0
     lengths = {n: np.array([s.length(tol / 10) for s in p.segments]) for n, p in pieces.items()}
