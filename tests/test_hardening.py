@@ -144,6 +144,53 @@ def test_a_long_run_is_announced_and_runs_with_yes(tmp_path):
     assert line.startswith("this run takes 20 frames of 1,666,665 steps (dt = 1e-08 s) = 33,333,300 steps, about ")
 
 
+def test_an_automatic_step_is_counted_too(tmp_path):
+    """dt = "auto" (here from --quality accurate: central differences at 0.9 x the stable step) was skipped by the
+    run-length guard: a stiff fine scene ran for hours unannounced. Its steps now come from the clock's own rule."""
+    stiff = 'material = { preset = "cotton", stretch = 1e6, shear = 1e6 }'
+    rc, _, err = cli("run", scene_file(tmp_path, res=32, frames=1000, material=stiff), "--no-progress",
+                     "--quality", "accurate")
+    one_error(rc, err, "the run is too long: 1000 frames of 10,617 steps (dt = auto: 1.57e-06 s, 0.9 x the stable "
+                       "step 1.74e-06 s) = 10,617,000 steps at least, about ", "needs --yes")
+
+
+def test_the_run_length_of_a_coarse_to_fine_cloth_is_that_of_its_finest_level():
+    """A multilevel cloth runs most of its steps on its finest level: the estimate takes its particles and, with
+    dt = "auto", its stable step, not those of the level the run starts on (the 5 mm T-shirt coarse to fine starts
+    on 5,541 particles, refines to 21,176, and was announced as the 5,541)."""
+    import taichi_cloth as tc
+
+    def scene(start):
+        cloth = tc.ClothBuilder.multilevel_grid((1.0, 1.0), (4, 4), 5, start_level=start)
+        return tc.Scene(cloth, integrator="explicit", dt="auto", pins=[{"near": [[-0.5, 0.5, 0], [0.5, 0.5, 0]]}])
+
+    coarse, fine = scene(0), scene(4)
+    assert coarse.model.data.n_particles < fine.model.data.n_particles == fine.model.capacity[0]
+    assert coarse.clock.substeps < fine.clock.substeps == guards.frame_plan(coarse)[0]
+    assert guards.frame_plan(coarse)[1] == pytest.approx(guards.frame_plan(fine)[1], rel=1e-9)
+    assert "of the finest level" in guards.frame_plan(coarse)[2]
+    assert guards.seconds_per_step(coarse) == guards.seconds_per_step(fine)
+
+
+def test_the_implicit_cost_per_particle_grows_with_the_cg_iterations():
+    """The implicit step's cost per particle is not one figure measured at one size: Jacobi's CG iterations grow
+    with the size (up to the cap), a cap raised lets them, and the collision stage costs per particle too."""
+    import taichi_cloth as tc
+
+    def sheet(**options):
+        return tc.Scene(tc.ClothBuilder.grid((1.0, 1.0), (8, 8)), integrator="implicit", dt=1 / 60, **options)
+
+    jacobi = sheet(integrator_options={"preconditioner": "jacobi"})
+    small, large = guards.implicit_cost(jacobi, 100)[0], guards.implicit_cost(jacobi, 10_000)[0]
+    assert small == pytest.approx(5e-7 + 40 * 3e-8) and large == pytest.approx(5e-7 + 200 * 3e-8)  # 200: the cap
+    raised = sheet(integrator_options={"preconditioner": "jacobi", "cg_max_iterations": 1000})
+    assert guards.implicit_cost(raised, 40_000)[0] == pytest.approx(5e-7 + 420 * 3e-8)  # 13 us, above the 8 it was
+    assert guards.implicit_cost(sheet(), 10_000)[0] == pytest.approx(5e-7 + 25 * 1.3e-7)  # auto: aggregation there
+    body = sheet(colliders=[{"type": "mesh", "path": "mannequin"}])
+    assert guards.seconds_per_step(body) - guards.seconds_per_step(sheet()) == pytest.approx(
+        64 * guards.MESH_COLLIDER_SECONDS_PER_PARTICLE + guards.SECONDS_PER_STEP_MESH_COLLIDER)
+
+
 # ------------------------------------------------------------------------------------------------ precision
 STIFF = 'material = { preset = "cotton", stretch = 1e14, shear = 1e14 }'
 
