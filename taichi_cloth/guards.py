@@ -19,13 +19,13 @@ shortest; one step a frame for an unconditionally stable integrator). The adapti
 fast motion near a collider, rolled back on a blow-up), never fewer, so this is the least it takes. seconds =
 steps x (fixed cost + P x cost per particle), P the most particles the run reaches (the model's capacity: the
 finest level of a coarse-to-fine cloth, a garment's pieces before their seams merge):
-- explicit family 70 ns a particle (fused steps: 0.05-0.3 ms per step at 64x64); approx-implicit 100 ns;
+- explicit family 70 ns a particle (the bench sheets: 37-75 ns); approx-implicit 100 ns (32-101 ns);
 - implicit: 0.5 us a particle plus I CG iterations of c each, and 10 us of launches a CG iteration: Jacobi
   (auto below 2,000 particles off 4-8 levels) I = 20 + 2 sqrt(P), c = 30 ns (CG iterations grow with the size: 43,
   79, 133, 200 = the cap on the bench sheets of 10^2, 32^2, 64^2, 128^2 particles at 1/60 s; 112 on a 24^2 sheet
   falling from two corners at 1/120 s, where the other terms still put the step at 1.05x the 2.2 ms measured);
-  aggregation (auto from 2,000 particles, or any garment with multigrid) I = 25, c = 130 ns; the 4-8 level cycle
-  I = 6, c = 250 ns; at most cg_max_iterations, three times as many with newton_converge;
+  aggregation (auto from 2,000 particles off 4-8 levels, or preconditioner = multigrid there) I = 25, c = 130 ns;
+  the 4-8 level cycle I = 6, c = 250 ns; at most cg_max_iterations, three times as many with newton_converge;
 - per step, per particle: a mesh collider 0.8 us (3.1 ms a step at 64x64, 13 ms at 128x128: docs/collision.md),
   self-collision 2 us (2.15 ms a step on the 1,370-particle T-shirt), the stretch limit 30 ns a pass (at most
   min(iterations, 20) passes);
@@ -33,16 +33,18 @@ finest level of a coarse-to-fine cloth, a garment's pieces before their seams me
   small explicit sheet over the mannequin takes 0.19 ms a step whatever its size), 100 us an implicit step.
 Compiling the kernels on a first run (15-25 s for a garment) is not counted.
 
-Against measured runs (2-core CPU, the "measured" figures): the implicit bench sheets (docs/performance.md) 0.6-1.8x,
-Jacobi 10^2 to 256^2, aggregation and the 4-8 cycle 1.2-2.4x; the 1 cm T-shirt (`run demos/scenes/sew_tshirt.toml
---resolution fit --frames 900`: 5,541 particles, aggregation, 11.8-30 ms a step measured) 28 ms a step, about 1 min;
-the 5 mm T-shirt coarse to fine (`sew_tshirt_multilevel.toml --resolution fine`, 21,176 particles on its finest
-level, 69-91 ms a step) about 3.5 min, where the rule before this one announced both as "about 1.33 min": it took
-the particles of the level the run starts on (5,541 for the 5 mm T-shirt, which then refined to four times as many;
-2.7-2.8 min of wall time), a cost per particle measured on one 128x128 Jacobi sheet (8 us) whatever the size, the
-preconditioner or the iteration cap, and no collision stage (an explicit sheet over the mannequin costs 10x its own
-step); with dt = "auto" it said nothing at all (a stiff fine scene at --quality accurate, 0.9 x the stable step
-of central differences, ran for hours unannounced).
+Against measured runs (2-core CPU; estimate / measured ms a step): the implicit bench sheets of
+docs/performance.md, Jacobi 0.95-1.9x (10^2 to 256^2 particles), aggregation 1.6-2.1x, the 4-8 cycle 1.2-1.8x;
+the demos hanging_cloth 4.1 / 2.9, drape_on_mannequin 11.3 / 6.1, sew_tshirt 8.3 / 7.4; the 1 cm T-shirt (`run
+demos/scenes/sew_tshirt.toml --resolution fit --frames 900`: 5,541 particles, aggregation) 29 / 11.8-30, about
+52 s for its 1,800 steps (44-80 s of wall time measured, 15-25 s of it the first frame's compiles); the 5 mm
+T-shirt coarse to fine (`sew_tshirt_multilevel.toml --resolution fine --frames 900`, 21,176 particles on its finest
+level) 110 / 69-91, about 3.3 min (2.7-2.8 min of wall time). The rule before this one announced both T-shirts
+as "about 1.33 min": it took the particles of the level the run starts on (the 5 mm T-shirt starts on 5,541, the
+1 cm T-shirt's count, and refines to four times as many), one cost per particle measured on one 128x128 Jacobi
+sheet (8 us) whatever the size, the preconditioner or the iteration cap, and no collision stage (an explicit sheet
+over the mannequin costs 10x its own step); with dt = "auto" it said nothing (a stiff fine scene at --quality
+accurate, 0.9 x the stable step of central differences, ran for hours unannounced).
 """
 from __future__ import annotations
 
