@@ -5,7 +5,7 @@ keys with the same line: `[[colliders]] #2: unknown key 'radus' (did you mean 'r
 A collider (SI units; taichi_cloth.colliders builds it):
     type = "sphere" (center, radius) | "capsule" (a, b, radius) | "plane" (point, normal) | "mesh" (path: a file or
     "mannequin", scale, translate, cell_size, mode = "fuzzy" | "exact", repulsion = {stiffness, distance,
-    max_force}) | "standin"; every type: thickness [m] = 0.003, friction = 0.3
+    max_force}) | "standin"; every type: thickness [m] = 0.003 (> 0 for a mesh, >= 0 for the others), friction = 0.3
 A pin group (taichi_cloth.pins.PinSpec):
     indices = [i, ...], near = [[x, y, z], ...], box = {min = [x, y, z], max = [x, y, z]}: what it selects (at least
     one); keyframes = [[t, dx, dy, dz], ...]: its motion (rows in strictly increasing t)
@@ -41,6 +41,8 @@ def _check_collider(v: Validator, col: dict, where: str) -> None:
     for key in sorted(given - required - optional):
         v.fail(where, f"{key!r} is not a {col['type']} collider key (it takes {', '.join(sorted(required | optional))},"
                       " thickness, friction)")
+    if col["type"] == "mesh" and not col["thickness"] > 0:  # a sphere, capsule or plane may have none
+        v.fail(f"{where} thickness", f"must be > 0 for a mesh collider, got {col['thickness']!r}")
     for key in [k for k, val in list(col.items()) if val is None]:
         del col[key]
 
@@ -54,7 +56,7 @@ COLLIDER_TABLE = Table({
     "cell_size": Field("number", None, positive), "mode": Field("str", None, choices=("fuzzy", "exact")),
     "repulsion": Table({"stiffness": Field("number", 1e-3, nonneg), "distance": Field("number", 0.01, positive),
                         "max_force": Field("number", 0.05, positive)}),
-    "thickness": Field("number", DEFAULT_THICKNESS, positive), "friction": Field("number", DEFAULT_FRICTION, nonneg)},
+    "thickness": Field("number", DEFAULT_THICKNESS, nonneg), "friction": Field("number", DEFAULT_FRICTION, nonneg)},
     check=_check_collider)
 
 
