@@ -158,6 +158,16 @@ class PinDriver:
         return self.state.positions()[self.pin_index.to_numpy()[: self.n]]
 
 
+def _old_path(self):
+    warnings.warn("PinSpec.path is now PinSpec.keyframes (as in a scene file's [[pins]])", DeprecationWarning,
+                  stacklevel=2)
+    return self.keyframes
+
+
+# the old name reads the motion too (as an InitVar it would read the class's default, None, for every group)
+PinSpec.path = property(_old_path, doc="The old name of keyframes (DeprecationWarning).")
+
+
 def pin_spec(spec, k: int) -> "PinSpec":
     """The PinSpec of Scene(pins=[...])'s entry k (0-based): a PinSpec passes through; a dict is checked as a
     scene file's [[pins]] table is (taichi_cloth.specs: SceneError naming "[[pins]] #k+1" and the key), and the

@@ -204,6 +204,8 @@ def test_a_pin_dict_moves_by_keyframes_and_the_old_name_path_still_works():
     with pytest.warns(DeprecationWarning, match=r"PinSpec\(path=...\) is now PinSpec\(keyframes=...\)"):
         spec = tc.PinSpec(indices=[0], path=rows)
     assert spec.keyframes(0.5) == pytest.approx([0.05, 0, 0])
+    with pytest.warns(DeprecationWarning, match=r"PinSpec.path is now PinSpec.keyframes"):
+        assert spec.path is spec.keyframes
     with pytest.raises(tc.SceneError, match=r"^\[\[pins\]\] #1: give keyframes, not both keyframes and path"):
         tc.Scene(cloth, pins=[{"indices": [0], "path": rows, "keyframes": rows}])
 
