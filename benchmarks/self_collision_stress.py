@@ -81,10 +81,10 @@ def towel_folded_three_times(self_collision, small: bool = False, integrator: st
         return keys
 
     held = x[:, 2] < W / 6
-    pins = [{"indices": np.nonzero((x[:, 0] > L / 2 - 1e-6) & held)[0].tolist(), "path": fold(0.0, 0, -(L / 2 - 0.01))},
-            {"indices": np.nonzero((x[:, 0] < -L / 2 + 1e-6) & held)[0].tolist(), "path": fold(1.2, 0, L / 2 - 0.01)},
+    pins = [{"indices": np.nonzero((x[:, 0] > L / 2 - 1e-6) & held)[0].tolist(), "keyframes": fold(0.0, 0, -(L / 2 - 0.01))},
+            {"indices": np.nonzero((x[:, 0] < -L / 2 + 1e-6) & held)[0].tolist(), "keyframes": fold(1.2, 0, L / 2 - 0.01)},
             {"indices": np.nonzero((x[:, 2] > W / 2 - 1e-6) & (np.abs(x[:, 0]) < L / 4 - 0.02))[0].tolist(),
-             "path": fold(2.4, 2, -(2 * W / 3), height=0.2, lift=0.06)}]
+             "keyframes": fold(2.4, 2, -(2 * W / 3), height=0.2, lift=0.06)}]
     scene = tc.Scene(cloth, integrator=integrator, **_step(integrator, step), air_damping=1.0,
                      self_collision=self_collision, pins=pins, colliders=FLOOR)
     return scene, 240 if small else 270
@@ -105,7 +105,7 @@ def twisted_sheet(self_collision, small: bool = False, integrator: str = "implic
             def path(t, y0=y0, z0=z0, turn=turn):
                 a = turn * np.pi / 3 * min(t, 6.0)
                 return np.array([0.0, y0 * np.cos(a) - z0 * np.sin(a) - y0, y0 * np.sin(a) + z0 * np.cos(a) - z0])
-            pins.append({"indices": [int(i)], "path": path})
+            pins.append({"indices": [int(i)], "keyframes": path})
     scene = tc.Scene(cloth, integrator=integrator, **_step(integrator, step), gravity=(0.0, 0.0, 0.0),
                      air_damping=1.0, self_collision=self_collision, pins=pins)
     return scene, 390
@@ -120,7 +120,7 @@ def jerked_sheet(self_collision, small: bool = False, integrator: str = "implici
     cloth = tc.ClothBuilder.grid((1.0, 1.0), (n, n), "cotton", center=(0.0 if jerk else 1.0, 1.0, 0.0), plane="xy")
     path = [[0.0, 0.0, 0.0, 0.0], [0.05, 1.0, 0.0, 0.0]] if jerk else None
     scene = tc.Scene(cloth, integrator=integrator, **_step(integrator, step, 1 / 240), self_collision=self_collision,
-                     pins=[{"indices": [n * (n - 1), n * n - 1], "path": path}])
+                     pins=[{"indices": [n * (n - 1), n * n - 1], "keyframes": path}])
     return scene, 600
 
 

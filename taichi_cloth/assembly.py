@@ -30,7 +30,7 @@ from .integrators import integrator_class
 from .linear import NestedLevels
 from .model import Model, State
 from .multilevel_cloth import MultilevelCloth
-from .pins import Pins, PinSpec, pinned_mask
+from .pins import Pins, PinSpec, pin_spec, pinned_mask
 from .refiner import Refiner, SettleCriterion
 from .rest import RestCriterion, RestMonitor
 from .stability import omega_max_estimate, stable_dt
@@ -85,11 +85,12 @@ def assemble(cloth, *, name: str = "cloth", integrator: str = DEFAULT_INTEGRATOR
                         calm_steps, motion, rollback)
     integrator_options: dict of the integrator's OPTIONS
     gravity:            [m/s^2]; air_damping: drag rate [1/s]
-    pins:               PinSpec list or dicts (fixed pins cost nothing per step; moving ones build a PinDriver)
+    pins:               PinSpec list or dicts (indices, near, box, keyframes: checked as a scene file's [[pins]],
+                        taichi_cloth.specs); fixed pins cost nothing per step, moving ones build a PinDriver
     wind:               None or Wind keyword arguments (velocity [m/s], coefficient, gust, gust_frequency)
     stretch_limit:      None or StretchLimit keyword arguments (max_strain, iterations, tolerance, omega)
-    colliders:          collider specs (dicts, see taichi_cloth.colliders) or collision objects; resolved after
-                        every step, in order
+    colliders:          collider specs (dicts, checked as a scene file's [[colliders]]: taichi_cloth.specs) or
+                        collision objects; resolved after every step, in order
     self_collision:     False, True, or SelfCollision keyword arguments (thickness, friction, continuous): the cloth
                         against its own triangles, resolved after the colliders
     multilevel:         for a MultilevelCloth or a MultilevelGarment: SettleCriterion keyword arguments (max_speed,
@@ -115,10 +116,10 @@ def assemble(cloth, *, name: str = "cloth", integrator: str = DEFAULT_INTEGRATOR
     state = State(model)
     parts_warnings: list[str] = []
 
-    specs = [p if isinstance(p, PinSpec) else PinSpec(**p) for p in pins] + source.pins
+    specs = [pin_spec(p, k) for k, p in enumerate(pins)] + source.pins
     pin_control = None
     if specs:
-        moving = [s for s in specs if s.path is not None]
+        moving = [s for s in specs if s.keyframes is not None]
         capacity = max(sum(len(s.select(d.positions)) for s in moving) for d in source.levels) if moving else None
         pin_control = Pins(model, state, specs, capacity)
 

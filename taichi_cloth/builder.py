@@ -10,6 +10,7 @@ import numpy as np
 from clothbase.meshes import load_triangle_mesh
 
 from .cloth import PLANES, ClothData, SpringKind, mesh_cloth, spring_arrays
+from .guards import check_grid
 from .material import Material
 from .material import material as as_material
 from .multilevel_cloth import MultilevelCloth, multilevel_grid
@@ -24,6 +25,9 @@ class ClothBuilder:
         """A rectangular sheet of size (W, H) [m] with (nu, nv) particles, centred at `center` [m], lying in
         `plane` ("xy": u along +x, v along +y, i.e. hanging; "xz": horizontal). Particle (i, j) is i + nu*j.
 
+        A grid larger than the machine's memory is refused (SceneError) before anything is allocated
+        (taichi_cloth.guards.check_grid).
+
         Springs: structural on the quad edges, shear on both quad diagonals, bend between particles two
         apart along u and v. Triangles split each quad along alternating diagonals (for normals/rendering).
         """
@@ -36,6 +40,7 @@ class ClothBuilder:
             raise ValueError(f"grid size must be positive [m], got {W}x{H}")
         if plane not in PLANES:
             raise ValueError(f"grid plane must be one of {', '.join(PLANES)}, got {plane!r}")
+        check_grid((nu, nv), "ClothBuilder.grid resolution")  # before numpy allocates any of it
         du, dv = W / (nu - 1), H / (nv - 1)
         iu, jv = np.meshgrid(np.arange(nu), np.arange(nv), indexing="xy")  # (nv, nu)
         idx = (iu + nu * jv).astype(np.int64)
@@ -46,8 +51,10 @@ class ClothBuilder:
         positions += np.asarray(center, dtype=np.float64)
 
         # area-lumped mass: interior rho*du*dv, halved on edges, quartered at corners
-        wu = np.ones(nu); wu[[0, -1]] = 0.5
-        wv = np.ones(nv); wv[[0, -1]] = 0.5
+        wu = np.ones(nu)
+        wu[[0, -1]] = 0.5
+        wv = np.ones(nv)
+        wv[[0, -1]] = 0.5
         mass = (mat.density * du * dv * np.outer(wv, wu)).reshape(-1)
 
         # structural: k = stretch * (strip width) / length; boundary strips are half as wide

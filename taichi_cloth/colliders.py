@@ -10,6 +10,8 @@ Spec keys (SI units):
                       "repulsion": None | {"stiffness": N, "distance": m, "max_force": N}}
   {"type": "standin"}: Zhang et al. 2017's sphere-collider body, a sphere-and-capsule stand-in for the mannequin
   every type also takes "thickness" [m] (default 0.003) and "friction" (default 0.3).
+A dict is checked as a scene file's [[colliders]] table is (taichi_cloth.specs): a misspelled or unknown key, a
+missing one, a value of the wrong kind are refused with one SceneError line naming "[[colliders]] #k" and the key.
 Analytic shapes with the same thickness and friction share one PrimitiveColliders (one kernel).
 `Colliders` is the scene's collision stage (and a controller for what it shows, counts and refills): `begin`
 remembers where the particles start a step; `collide`, after the step and the controllers' after_step, pushes them
@@ -17,6 +19,7 @@ out and writes the contact normals the next step's integrator filters (Scene.sub
 """
 from __future__ import annotations
 
+import inspect
 from pathlib import Path
 
 import numpy as np
@@ -29,9 +32,8 @@ from collision.self_collision import SelfCollision
 
 from .contacts import require_bound
 from .control import Controller
-
-DEFAULT_THICKNESS = 0.003  # m
-DEFAULT_FRICTION = 0.3
+from .guards import check_voxel_grid
+from .specs import collider_table
 
 
 def body_mesh(path: str, scale: float = 1.0, translate=(0.0, 0.0, 0.0), base_dir: Path | None = None):
@@ -45,16 +47,23 @@ def body_mesh(path: str, scale: float = 1.0, translate=(0.0, 0.0, 0.0), base_dir
     return load_triangle_mesh(p, scale, translate)
 
 
+#: [m] the motion per step a mesh collider's voxel grid leaves room for (MeshCollider's max_step)
+MAX_STEP = inspect.signature(MeshCollider).parameters["max_step"].default
+
+
 def build_colliders(specs, base_dir: Path | None = None) -> list:
-    """Collider objects for a list of spec dicts (see the module docstring); objects pass through."""
+    """Collider objects for a list of spec dicts (see the module docstring); objects pass through. Each dict is
+    checked as a scene file's [[colliders]] table is (taichi_cloth.specs: SceneError naming "[[colliders]] #k" and
+    the key), and a mesh's voxel grid against the machine's memory before it is allocated (guards)."""
     out, groups = [], {}
-    for spec in specs:
+    for k, spec in enumerate(specs):
         if not isinstance(spec, dict):
             out.append(spec)
             continue
+        where = f"[[colliders]] #{k + 1}"
+        spec = collider_table(spec, where)
         kind = spec["type"]
-        thickness = spec.get("thickness", DEFAULT_THICKNESS)
-        friction = spec.get("friction", DEFAULT_FRICTION)
+        thickness, friction = spec["thickness"], spec["friction"]
         if kind == "mesh":
             if "vertices" in spec:  # a body given as arrays (e.g. a fitted taichi_cloth.body morph)
                 v, t = spec["vertices"], spec["triangles"]
@@ -62,7 +71,11 @@ def build_colliders(specs, base_dir: Path | None = None) -> list:
                 v, t = body_mesh(spec["path"], spec.get("scale", 1.0), spec.get("translate", (0.0, 0.0, 0.0)),
                                  base_dir)
             open_mesh_warning(t, str(spec["path"]))
-            out.append(MeshCollider(v, t, thickness=thickness, friction=friction, cell_size=spec.get("cell_size"),
+            cell = spec.get("cell_size")
+            if cell is not None:  # the default (1.5 x the mean edge) bins each triangle into a few cells
+                check_voxel_grid(v, t, cell, thickness, thickness + MAX_STEP, f"{where} cell_size {cell:g} m "
+                                 f"(mesh {spec['path']})")
+            out.append(MeshCollider(v, t, thickness=thickness, friction=friction, cell_size=cell,
                                     mode=spec.get("mode", "fuzzy"), repulsion=spec.get("repulsion"),
                                     source=str(spec["path"])))
         elif kind in ("sphere", "capsule", "plane", "standin"):

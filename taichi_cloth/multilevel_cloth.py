@@ -17,6 +17,7 @@ from clothbase.meshes import rows_in
 from multilevel.hierarchy import Hierarchy48, signed_areas
 
 from .cloth import ClothData, SpringKind, in_plane, mesh_cloth
+from .guards import check_multilevel_grid
 from .material import Material
 from .material import material as as_material
 
@@ -82,8 +83,15 @@ def multilevel_cloth(hierarchy, material: str | Material = "cotton", center=(0.0
     return MultilevelCloth(hierarchy, levels, start_level, mat, tuple(center), plane)
 
 
+def _whole(x) -> bool:
+    return isinstance(x, (int, np.integer)) and not isinstance(x, bool)
+
+
 def multilevel_grid(size=(1.0, 1.0), base_cells=(4, 4), levels: int = 5, material: str | Material = "cotton",
                     center=(0.0, 0.0, 0.0), plane: str = "xy", start_level: int = 0) -> MultilevelCloth:
     """A W x H [m] rectangle as a 4-8 hierarchy: base grid of (nx, ny) cells with alternating diagonals,
-    refined levels-1 times by bisection. Level L (0-based) has spacing (W/nx) / 2^(L/2)."""
+    refined levels-1 times by bisection. Level L (0-based) has spacing (W/nx) / 2^(L/2). A hierarchy larger than
+    the machine's memory is refused (SceneError) before anything is allocated (taichi_cloth.guards)."""
+    if _whole(levels) and len(base_cells) == 2 and all(_whole(c) and c >= 1 for c in base_cells) and levels >= 1:
+        check_multilevel_grid(base_cells, levels, "ClothBuilder.multilevel_grid")  # the hierarchy checks the rest
     return multilevel_cloth(Hierarchy48.rectangle(size, base_cells, levels), material, center, plane, start_level)

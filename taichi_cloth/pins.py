@@ -7,7 +7,8 @@ the selected particles of whatever cloth the model holds (again after a level sw
 the moving groups after every step.
 """
 
-from dataclasses import dataclass
+import warnings
+from dataclasses import InitVar, dataclass
 from typing import Callable, Sequence
 
 import numpy as np
@@ -16,6 +17,7 @@ import taichi as ti
 from clothbase.fields import FieldBlock
 
 from .control import Controller
+from .specs import pin_table
 
 
 class KeyframePath:
@@ -37,22 +39,32 @@ class KeyframePath:
 class PinSpec:
     """A group of pinned particles.
 
-    indices: particle indices;
-    near:    points [m]; each pins the particle whose rest position is nearest to it;
-    box:     ((xmin, ymin, zmin), (xmax, ymax, zmax)) [m]; pins every particle whose rest position is inside;
-    path:    None (fixed), keyframes [[t, dx, dy, dz], ...] or any callable t [s] -> offset (3,) [m];
-    where:   what names the group in an error message (a scene file's "[[pins]] #2"), or "".
+    indices:   particle indices;
+    near:      points [m]; each pins the particle whose rest position is nearest to it;
+    box:       ((xmin, ymin, zmin), (xmax, ymax, zmax)) [m]; pins every particle whose rest position is inside;
+    keyframes: None (fixed), keyframes [[t, dx, dy, dz], ...] or any callable t [s] -> offset (3,) [m]: the
+               group's motion (a scene file's [[pins]] keyframes); `path=`, its old name, still works with a
+               DeprecationWarning;
+    where:     what names the group in an error message (a scene file's "[[pins]] #2"), or "".
+    A dict for Scene(pins=[...]) is checked as a scene file's [[pins]] table is (pin_spec, taichi_cloth.specs).
     """
 
     indices: Sequence[int] = ()
     near: Sequence[Sequence[float]] = ()
     box: tuple | None = None
-    path: Callable[[float], np.ndarray] | Sequence | None = None
+    keyframes: Callable[[float], np.ndarray] | Sequence | None = None
     where: str = ""
+    path: InitVar[Callable[[float], np.ndarray] | Sequence | None] = None  # the old name of keyframes
 
-    def __post_init__(self):
-        if self.path is not None and not callable(self.path):
-            self.path = KeyframePath(self.path)
+    def __post_init__(self, path):
+        if path is not None:
+            if self.keyframes is not None:
+                raise ValueError("PinSpec: give keyframes, not both keyframes and path (its old name)")
+            warnings.warn("PinSpec(path=...) is now PinSpec(keyframes=...) (as in a scene file's [[pins]])",
+                          DeprecationWarning, stacklevel=3)
+            self.keyframes = path
+        if self.keyframes is not None and not callable(self.keyframes):
+            self.keyframes = KeyframePath(self.keyframes)
 
     def select(self, rest_positions: np.ndarray) -> np.ndarray:
         """Indices (sorted, unique) of the particles this spec pins."""
@@ -84,7 +96,7 @@ class PinSpec:
 
 @ti.data_oriented
 class PinDriver:
-    """Moves the particles of the pin groups that have a path. Built only when one does.
+    """Moves the particles of the pin groups that have keyframes. Built only when one does.
 
     pin_index (N,) i32, pin_origin (N,) vec3 [m], pin_group (N,) i32; group_offset / group_velocity (G,) vec3.
     N is a capacity (`capacity`, default the groups' size) with a live count, so that a refined level can
@@ -146,6 +158,26 @@ class PinDriver:
         return self.state.positions()[self.pin_index.to_numpy()[: self.n]]
 
 
+def _old_path(self):
+    warnings.warn("PinSpec.path is now PinSpec.keyframes (as in a scene file's [[pins]])", DeprecationWarning,
+                  stacklevel=2)
+    return self.keyframes
+
+
+# the old name reads the motion too (as an InitVar it would read the class's default, None, for every group)
+PinSpec.path = property(_old_path, doc="The old name of keyframes (DeprecationWarning).")
+
+
+def pin_spec(spec, k: int) -> "PinSpec":
+    """The PinSpec of Scene(pins=[...])'s entry k (0-based): a PinSpec passes through; a dict is checked as a
+    scene file's [[pins]] table is (taichi_cloth.specs: SceneError naming "[[pins]] #k+1" and the key), and the
+    group is named so in later messages (a box that holds no particle)."""
+    if isinstance(spec, PinSpec):
+        return spec
+    where = f"[[pins]] #{k + 1}"
+    return PinSpec(**pin_table(spec, where), where=where)
+
+
 def pinned_mask(specs: Sequence[PinSpec], rest_positions: np.ndarray) -> np.ndarray:
     """(P,) bool: the particles (of a cloth with these rest positions [m]) that any of `specs` pins."""
     pinned = np.zeros(len(rest_positions), dtype=bool)
@@ -156,7 +188,7 @@ def pinned_mask(specs: Sequence[PinSpec], rest_positions: np.ndarray) -> np.ndar
 
 class Pins(Controller):
     """The scene's pins: every PinSpec selects particles on the current cloth's rest positions; their inverse mass
-    is 0. Groups with a path move after every step (a PinDriver, built only when one has a path). `capacity`: the
+    is 0. Groups with keyframes move after every step (a PinDriver, built only when one has them). `capacity`: the
     most moving particles any cloth of the scene may select (a multilevel cloth's finest level).
 
     indices: (N,) int64 the pinned particles of the current cloth
@@ -167,10 +199,10 @@ class Pins(Controller):
     def __init__(self, model, state, specs: Sequence[PinSpec], capacity: int | None = None):
         self.model, self.state = model, state
         self.specs = list(specs)
-        moving = [s for s in self.specs if s.path is not None]
+        moving = [s for s in self.specs if s.keyframes is not None]
         self.driver = None
         if moving:
-            groups = [(s.select(model.data.positions), s.path) for s in moving]
+            groups = [(s.select(model.data.positions), s.keyframes) for s in moving]
             self.driver = PinDriver(model, state, groups, capacity)
         self._select()
         self._place(0.0, None)
@@ -184,7 +216,7 @@ class Pins(Controller):
         groups = [(spec.select(rest), spec) for spec in self.specs]
         self.model.pin(np.concatenate([idx for idx, _ in groups]) if groups else [])
         if self.driver is not None:
-            self.driver.load([idx for idx, spec in groups if spec.path is not None])
+            self.driver.load([idx for idx, spec in groups if spec.keyframes is not None])
         self.indices = np.nonzero(self.model.pinned)[0]
 
     def _place(self, t: float, dt: float | None) -> None:

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import atexit
 import os
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -103,13 +104,57 @@ def _save_kernel_cache() -> None:
 #: and every GPU that OpenGL could reach has a Vulkan driver too
 GPU_ARCHS = ("cuda", "vulkan", "metal")
 
+#: the Vulkan probe, run in a child process: Taichi starts on Vulkan and runs one kernel, or the child fails (an
+#: exception, or a crash of the driver, which must not take the caller with it)
+_VULKAN_PROBE = """
+import sys
+import taichi as ti
+from taichi.lang import impl
+ti.init(arch=ti.vulkan, offline_cache=False, log_level=ti.ERROR)
+if impl.current_cfg().arch != ti.vulkan:
+    sys.exit(3)
+x = ti.field(ti.i32, 4)
+@ti.kernel
+def fill():
+    for i in x:
+        x[i] = i + 1
+fill()
+sys.exit(0 if x.to_numpy().sum() == 10 else 4)
+"""
+#: [s] the probe's limit (Taichi's start on a GPU takes a few seconds)
+VULKAN_PROBE_SECONDS = 120.0
+_vulkan_usable: bool | None = None
+
+
+def vulkan_device_usable() -> bool:
+    """Whether Taichi can run on a Vulkan device here. Taichi's is_arch_supported(ti.vulkan) only finds the Vulkan
+    loader (libvulkan): on a machine with the loader and no device (no GPU, or no driver for it) it says yes, and
+    ti.init(arch=ti.vulkan) then fails. So a child process starts Taichi on Vulkan and runs one kernel (once per
+    process; a few seconds, only for --arch gpu where the loader is there)."""
+    global _vulkan_usable
+    if _vulkan_usable is None:
+        try:
+            done = subprocess.run([sys.executable, "-c", _VULKAN_PROBE], capture_output=True,
+                                  timeout=VULKAN_PROBE_SECONDS)
+            _vulkan_usable = done.returncode == 0
+        except (OSError, subprocess.SubprocessError):
+            _vulkan_usable = False
+    return _vulkan_usable
+
 
 def gpu_arch():
-    """The first GPU backend of GPU_ARCHS this machine supports, or ti.cpu with one warning line when none is."""
+    """The first GPU backend of GPU_ARCHS this machine can run on, or ti.cpu with one warning line when none is. A
+    Vulkan loader without a usable device (vulkan_device_usable) is no GPU."""
+    loader_only = False
     for name in GPU_ARCHS:
-        if is_arch_supported(getattr(ti, name)):
-            return getattr(ti, name)
-    warn("no GPU found (no CUDA, Vulkan or Metal device): running on the CPU")
+        if not is_arch_supported(getattr(ti, name)):
+            continue
+        if name == "vulkan" and not vulkan_device_usable():
+            loader_only = True
+            continue
+        return getattr(ti, name)
+    why = "; the Vulkan loader is installed but finds no usable device" if loader_only else ""
+    warn(f"no GPU found (no CUDA, Vulkan or Metal device{why}): running on the CPU")
     return ti.cpu
 
 

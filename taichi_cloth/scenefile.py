@@ -91,12 +91,13 @@ from .errors import BodyError, MeshError, PatternError, SceneError
 from .garment.garment import RESOLUTIONS, build_garment
 from .garment.garmentfile import load_garment
 from .garment.levels import multilevel_garment
-from .guards import check_memory, check_precision, grid_particles
+from .guards import check_grid, check_multilevel_grid, check_precision
 from .integrators import INTEGRATORS
 from .paths import check_output_folder
 from .quality import QUALITIES, coarsen_resolution, preset
 from .scene import Scene
 from .schema import MATERIAL_TABLE, Array, Field, Table, Validator, at_least, material_of, nonneg, positive, read_toml
+from .specs import COLLIDER_TABLE, PIN_TABLE
 
 #: the girths a [body] table may set (taichi_cloth.body.GIRTHS; spelled out so parsing imports no scipy)
 BODY_GIRTHS = ("chest", "underbust", "waist", "hips", "neck", "upper_arm", "thigh")
@@ -136,25 +137,14 @@ SCHEMA = Table({
     "integrator": Table({"name": Field("str", choices=tuple(INTEGRATORS)),
                          "dt": DT_FIELD, "adaptive": ADAPTIVE_TABLE,
                          "step_guard": Field("str", "warn", choices=STEP_GUARDS)}, required=True, extra=True),
-    "pins": Array(Table({"indices": Field("ints", []), "near": Field("points", []),
-                         "box": Table({"min": Field("vec3"), "max": Field("vec3")}),
-                         "keyframes": Field("keyframes", None)})),
+    "pins": Array(PIN_TABLE),  # the tables the Python API checks its dicts by (taichi_cloth.specs)
     "wind": Table({"velocity": Field("vec3"), "coefficient": Field("number", 1.0, nonneg),
                    "gust": Field("number", 0.0, nonneg), "gust_frequency": Field("number", 0.5, positive)}),
     "stretch_limit": Table({"max_strain": Field("number", 0.1, positive),
                             "iterations": Field("int", 100, at_least(1)),
                             "tolerance": Field("number", 1e-3, nonneg),
                             "omega": Field("number", 1.5, lambda v: None if 0 < v < 2 else "must lie in (0, 2)")}),
-    "colliders": Array(Table({
-        "type": Field("str", choices=("sphere", "capsule", "plane", "mesh", "standin")),
-        "center": Field("vec3", None), "radius": Field("number", None, positive),
-        "a": Field("vec3", None), "b": Field("vec3", None),
-        "point": Field("vec3", None), "normal": Field("vec3", None),
-        "path": Field("str", None), "scale": Field("number", None, positive), "translate": Field("vec3", None),
-        "cell_size": Field("number", None, positive), "mode": Field("str", None, choices=("fuzzy", "exact")),
-        "repulsion": Table({"stiffness": Field("number", 1e-3, nonneg), "distance": Field("number", 0.01, positive),
-                            "max_force": Field("number", 0.05, positive)}),
-        "thickness": Field("number", 0.003, positive), "friction": Field("number", 0.3, nonneg)})),
+    "colliders": Array(COLLIDER_TABLE),
     "multilevel": Table({
         "levels": Field("int", None, lambda v: None if 1 <= v <= 8 else "must lie in 1..8"),
         "base_cells": Field("int2", [4, 4], lambda v: None if min(v) >= 1 else "must be >= 1 each"),
@@ -169,7 +159,8 @@ SCHEMA = Table({
     }),
     "sewing": Table({"close_speed": Field("number", 0.5, positive), "max_force": Field("number", 5.0, positive),
                      "epsilon": Field("number", 0.002, positive), "energy_tolerance": Field("number", 1e-2, positive),
-                     "gravity": Field("bool", False), "join": Field("str", "merge", choices=("merge", "spring", "none")),
+                     "gravity": Field("bool", False),
+                     "join": Field("str", "merge", choices=("merge", "spring", "none")),
                      "join_stiffness": Field("number", None, positive), "max_time": Field("number", 10.0, positive),
                      "stall_gap": Field("number", 0.25, positive), "stiffness": Field("number", None, positive)}),
     "body": Table({**{g: Field("number", None, positive) for g in BODY_GIRTHS},
@@ -234,43 +225,18 @@ def parse_scene(source: str | Path | dict, base_dir: Path | None = None, label: 
             v.fail("[multilevel] start_level", f"must be <= levels ({ml['levels']}), got {ml['start_level']}")
     elif grid is not None and grid["resolution"] is None:
         v.fail("[cloth.grid]", "missing required key 'resolution'")
-    for k, pin in enumerate(cfg["pins"]):
-        if not pin["indices"] and not pin["near"] and pin.get("box") is None:
-            v.fail(f"[[pins]] #{k + 1}", "selects nothing: give indices, near or box")
-        if pin["keyframes"] is not None and any(b[0] <= a[0] for a, b in zip(pin["keyframes"], pin["keyframes"][1:])):
-            v.fail(f"[[pins]] #{k + 1} keyframes", "times must increase strictly")
-    for k, col in enumerate(cfg["colliders"]):
-        _check_collider(v, col, f"[[colliders]] #{k + 1}")
     body = cfg.get("body")
     if body is not None:
         if not any(body[g] is not None for g in BODY_GIRTHS):
             v.fail("[body]", f"names no girth: give at least one of {', '.join(BODY_GIRTHS)} [m]")
         if not any(c["type"] == "mesh" and c.get("path") == "mannequin" for c in cfg["colliders"]):
             v.fail("[body]", "morphs the mannequin: add [[colliders]] type = \"mesh\", path = \"mannequin\"")
-    size = grid_particles(cfg)
-    if size is not None:
-        check_memory(size[0], f"{label}: {size[1]}")  # before numpy or Taichi allocates any of it
+    # the builder's memory guard, before Taichi starts (the builder checks again what it is asked to build)
+    if ml is not None and grid is not None:
+        check_multilevel_grid(ml["base_cells"], ml["levels"], f"{label}: [multilevel]")
+    elif grid is not None:
+        check_grid(grid["resolution"], f"{label}: [cloth.grid] resolution")
     return cfg
-
-
-#: keys each collider type needs, and the optional ones it accepts (thickness and friction: every type)
-COLLIDER_KEYS = {"sphere": ({"center", "radius"}, set()), "capsule": ({"a", "b", "radius"}, set()),
-                 "plane": ({"point", "normal"}, set()), "standin": (set(), set()),
-                 "mesh": ({"path"}, {"scale", "translate", "cell_size", "mode", "repulsion"})}
-
-
-def _check_collider(v: "Validator", col: dict, where: str) -> None:
-    required, optional = COLLIDER_KEYS[col["type"]]
-    given = {k for k, val in col.items() if val is not None} - {"type", "thickness", "friction"}
-    for key in sorted(required - given):
-        v.fail(where, f"a {col['type']} collider needs {key!r}")
-    for key in sorted(given - required - optional):
-        v.fail(where, f"{key!r} is not a {col['type']} collider key (it takes {', '.join(sorted(required | optional))},"
-                      " thickness, friction)")
-    if col["type"] == "plane" and not any(col["normal"]):
-        v.fail(f"{where} normal", "must be non-zero")
-    for key in [k for k, val in list(col.items()) if val is None]:
-        del col[key]
 
 
 def _check_integrator_options(v: Validator, integ: dict) -> None:
@@ -321,8 +287,10 @@ def build_scene(cfg: dict) -> Scene:
             path = Path(m["path"])
             path = path if path.is_absolute() else cfg["_base_dir"] / path
             data = ClothBuilder.mesh_file(path, mat, m["scale"], m["translate"])
-    except MeshError as exc:
-        raise SceneError(f"{label}: [cloth.mesh] path: {exc}") from None
+    except MeshError as exc:  # a mesh cloth's file, or the body a garment is placed on (the message names it)
+        where = f"[cloth] garment {cloth_cfg['garment']}" if cloth_cfg.get("garment") is not None else \
+            "[cloth.mesh] path"
+        raise SceneError(f"{label}: {where}: {exc}") from None
     except PatternError as exc:
         garment = str(cloth_cfg.get("garment"))
         named = f" {garment}" if cloth_cfg.get("garment") is not None and garment not in str(exc) else ""
@@ -330,10 +298,7 @@ def build_scene(cfg: dict) -> Scene:
     integ = dict(cfg["integrator"])
     name, dt, guard = integ.pop("name"), integ.pop("dt"), integ.pop("step_guard")
     adaptive = {k: val for k, val in (integ.pop("adaptive", None) or {}).items() if val is not None}
-    pins = [dict(indices=p["indices"], near=p["near"],
-                 box=(p["box"]["min"], p["box"]["max"]) if p.get("box") else None, path=p["keyframes"],
-                 where=f"[[pins]] #{k + 1}")
-            for k, p in enumerate(cfg["pins"])]
+    pins = cfg["pins"]  # checked again by the same tables, and named "[[pins]] #k" alike (taichi_cloth.specs)
     try:
         return Scene(data, name=cfg["name"], integrator=name, dt=dt, integrator_options=integ,
                      adaptive=adaptive if dt == "auto" else None,
@@ -364,7 +329,10 @@ def _body(table: dict, colliders: list, label: str):
         return None, {"weights": fit.weights, "duration": table["morph_time"]}, colliders
     morphed = [dict(c, vertices=fit.vertices, triangles=fit.triangles, path="mannequin (fitted)")
                if c["type"] == "mesh" and c.get("path") == "mannequin" else c for c in colliders]
-    return Body.from_mesh(fit.vertices, fit.triangles), None, morphed
+    try:
+        return Body.from_mesh(fit.vertices, fit.triangles, "the mannequin fitted to its girths"), None, morphed
+    except MeshError as exc:
+        raise SceneError(f"{label}: [body]: {exc}") from None
 
 
 def _sewing(sewing: dict | None, cloth_cfg: dict) -> dict | None:

@@ -38,6 +38,7 @@ class Table:
     allow_string: Field | None = None  # a table that may also be given as a plain value (material = "cotton")
     extra: bool = False                # unknown keys are checked later (integrator options)
     always: bool = False               # filled with its defaults when absent ([output])
+    check: Callable | None = None      # check(validator, table, label): what spans its keys, once they are valid
 
 
 @dataclass
@@ -53,6 +54,10 @@ def positive(v):
 
 def nonneg(v):
     return None if v >= 0 else "must be >= 0"
+
+
+def nonzero(v):
+    return None if any(x != 0 for x in v) else "must be non-zero (a direction)"
 
 
 def at_least(n):
@@ -80,7 +85,7 @@ KINDS: dict[str, tuple[Callable[[Any], bool], str]] = {
     "vec3": (vector(3), "a list of 3 numbers"),
     "int2": (vector(2, is_int), "a list of 2 integers"),
     "ints": (lambda v: isinstance(v, list) and all(is_int(x) for x in v), "a list of integers"),
-    "points": (lambda v: isinstance(v, list) and len(v) > 0 and all(vector(3)(p) for p in v),
+    "points": (lambda v: isinstance(v, list) and all(vector(3)(p) for p in v),
                "a list of [x, y, z] points"),
     "keyframes": (lambda v: isinstance(v, list) and len(v) > 0 and all(vector(4)(p) for p in v),
                   "a list of [t, dx, dy, dz] rows"),
@@ -102,14 +107,16 @@ MATERIAL_TABLE = Table({"preset": Field("str", None, choices=tuple(MATERIALS)),
 
 class Validator:
     """Checks data against a schema. Locations read like the TOML: `[cloth.grid] size`, `[[pins]] #2 near`.
-    `source` names the file in every message; `error` is the exception raised (SceneError, PatternError...)."""
+    `source` names the file in every message ("": none, a dict of the Python API); `error` is the exception raised
+    (SceneError, PatternError...)."""
 
     def __init__(self, source: str, error: type[Exception] = SceneError):
         self.source = source
         self.error = error
 
     def fail(self, where: str, msg: str):
-        raise self.error(f"{self.source}: {where}: {msg}" if where else f"{self.source}: {msg}")
+        text = f"{where}: {msg}" if where else msg
+        raise self.error(f"{self.source}: {text}" if self.source else text)
 
     @staticmethod
     def key_at(table: str, key: str) -> str:
@@ -159,6 +166,8 @@ class Validator:
                 out[key] = self.table(sub, {}, self.dotted(name, key), f"[{self.dotted(name, key)}]")
             elif isinstance(sub, Array):
                 out[key] = []
+        if spec.check is not None:
+            spec.check(self, out, label)
         return out
 
     @staticmethod

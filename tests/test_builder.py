@@ -107,3 +107,16 @@ def test_mesh_file_round_trip(tmp_path):
     assert np.ptp(d.positions, axis=0) == pytest.approx([2.0, 2.0, 2.0])
     with pytest.raises(tc.MeshError, match="no such mesh file"):
         tc.ClothBuilder.mesh_file(tmp_path / "missing.obj")
+
+
+def test_a_grid_the_machine_cannot_hold_is_refused_by_the_builder_before_it_allocates():
+    """The memory guard is the builder's (taichi_cloth.guards.check_grid): in Python too a huge grid gets one
+    SceneError naming the resolution and the estimate, not numpy's _ArrayMemoryError traceback (the scene-file reader
+    calls the same guard before Taichi starts)."""
+    with pytest.raises(tc.SceneError, match=r"^ClothBuilder.grid resolution 100000 x 100000: 10,000,000,000 particles "
+                                            r"need about 55.9 TiB of memory \(estimate, 6 KiB a particle\) and this "
+                                            r"machine has .* available; use a coarser resolution$"):
+        tc.ClothBuilder.grid((1, 1), (100000, 100000))
+    with pytest.raises(tc.SceneError, match=r"^ClothBuilder.multilevel_grid base_cells 40 x 40, levels 20: "
+                                            r"1,762,656,256 particles need about .*; use fewer levels$"):
+        tc.ClothBuilder.multilevel_grid((1, 1), (40, 40), 20)

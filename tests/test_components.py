@@ -30,7 +30,8 @@ def test_unnamed_components_are_never_built_or_compiled():
 def test_named_components_compile_their_kernels():
     with tc.CompileCounter() as cc:
         sc = tc.Scene(grid(), integrator="explicit", dt=1e-4, wind={"velocity": (0, 0, 3.0)},
-                      stretch_limit={"max_strain": 0.1}, pins=[{"indices": [30], "path": [[0, 0, 0, 0], [1, 0.1, 0, 0]]}])
+                      stretch_limit={"max_strain": 0.1},
+                      pins=[{"indices": [30], "keyframes": [[0, 0, 0, 0], [1, 0.1, 0, 0]]}])
         sc.step(2)
     compiled = names(cc)
     for present in ("VertexNormals.compute", "StretchLimit._passes", "PinDriver._place", "FusedSteps._step"):

@@ -1,5 +1,6 @@
 """Placement of 2D pattern pieces around the shipped mannequin (taichi_cloth.garment.placement): the body's
-landmarks, parts and frames (taichi_cloth.body.landmarks), and the wrap rule (arc length kept along rows, clearance, little stretch)."""
+landmarks, parts and frames (taichi_cloth.body.landmarks), and the wrap rule (arc length kept along rows, clearance,
+little stretch)."""
 import math
 
 import numpy as np
@@ -211,3 +212,41 @@ def test_placement_errors_name_the_problem(body):
         Placement("torso_front", at=(0.1,))
     with pytest.raises(PatternError, match=r"shape \(n, 2\)"):
         place(np.zeros((4, 3)), Placement("torso_front"), body)
+
+
+@pytest.mark.parametrize("key", ["u_axis", "v_axis"])
+def test_a_free_placement_with_a_zero_axis_is_refused_naming_the_key(key):
+    """A zero axis has no direction: the piece was placed at NaN. Refused when the placement is made, in Python and
+    in a garment file, naming the key and its value."""
+    from taichi_cloth.garment.garment import FreePlacement
+
+    with pytest.raises(PatternError, match=rf"^free placement {key} must be a non-zero direction, got \(0, 0, 0\)$"):
+        FreePlacement((0.0, 1.0, 0.0), **{key: (0, 0, 0)})
+    with pytest.raises(PatternError, match=r"u_axis \(1, 0, 0\) and v_axis \(2, 0, 0\) are parallel"):
+        FreePlacement((0.0, 1.0, 0.0), u_axis=(1, 0, 0), v_axis=(2, 0, 0))
+    with pytest.raises(PatternError, match=r"free placement origin must be 3 finite numbers, got \(0.0, nan, 0.0\)"):
+        FreePlacement((0.0, float("nan"), 0.0))
+
+
+@pytest.mark.parametrize("placement, words", [
+    ("{origin = [0, 100, 0], u_axis = [0, 0, 0]}",
+     r"\[\[pieces\]\] #1 placement u_axis: must be non-zero \(a direction\), got \[0, 0, 0\]"),
+    ("{origin = [0, 100, 0], v_axis = [0.0, 0.0, 0.0]}",
+     r"\[\[pieces\]\] #1 placement v_axis: must be non-zero \(a direction\), got \[0.0, 0.0, 0.0\]"),
+    ("{origin = [0, 100, 0], u_axis = [0, 1, 0]}",
+     r"\[\[pieces\]\] #1 \('front'\) placement: u_axis \(0, 1, 0\) and v_axis \(0.0, 1.0, 0.0\) are parallel"),
+])
+def test_a_garment_file_refuses_a_zero_or_parallel_axis(tmp_path, placement, words):
+    from taichi_cloth.garment.garmentfile import load_garment
+
+    path = tmp_path / "flat.toml"
+    path.write_text(f"""name = "flat"
+units = "cm"
+spacing = 5
+[[pieces]]
+name = "front"
+outline = [{{at = [0, 0]}}, {{at = [20, 0]}}, {{at = [20, 20]}}, {{at = [0, 20]}}]
+placement = {placement}
+""")
+    with pytest.raises(PatternError, match=rf"^{tmp_path / 'flat.toml'}: {words}$"):
+        load_garment(path)

@@ -3,6 +3,7 @@ or a crash; Ctrl-C ends a command with one `interrupted:` line (exit 130) and ke
 run `python -m taichi_cloth` (or a demo script) in a subprocess."""
 import errno
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -47,10 +48,12 @@ def scene_file(tmp_path, name="scene.toml", res=6, frames=1, dt=0.001, integrato
     return path
 
 
-def cli(*args, cwd=None, timeout=300):
-    """(exit code, stdout, stderr lines other than Taichi's own banner and log lines)."""
+def cli(*args, cwd=None, timeout=300, code=None):
+    """(exit code, stdout, stderr lines other than Taichi's own banner and log lines). `code`: Python run instead of
+    `-m taichi_cloth` (it calls taichi_cloth.cli.main itself, after faking what a test fakes)."""
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    done = subprocess.run([sys.executable, "-m", "taichi_cloth", *map(str, args)], capture_output=True, text=True,
+    start = ["-c", code] if code is not None else ["-m", "taichi_cloth"]
+    done = subprocess.run([sys.executable, *start, *map(str, args)], capture_output=True, text=True,
                           cwd=cwd or ROOT, env=env, timeout=timeout)
     noise = ("[Taichi]", "[W ", "[I ")
     err = [line for line in done.stderr.splitlines() if line.strip() and not line.startswith(noise)]
@@ -95,6 +98,49 @@ def test_memory_guard_against_a_given_machine():
         guards.check_memory(1001, "x", available=1000 * guards.BYTES_PER_PARTICLE)
 
 
+def test_a_garment_spacing_the_machine_cannot_mesh_is_refused_before_meshing(tmp_path):
+    """A tiny garment spacing means billions of particles: refused before the pieces are meshed (or the body is
+    analysed), naming the garment, the spacing and the estimate; from a scene file, with the garment file's name."""
+    import taichi_cloth as tc
+    from taichi_cloth.errors import PatternError
+    from taichi_cloth.garment.garment import build_garment
+    from taichi_cloth.garment.garmentfile import load_garment
+
+    spec = load_garment(ROOT / "demos/garments/tshirt.toml")
+    assert guards.sheet_particles(sum(p.area() for p in spec.pieces), sum(p.perimeter() for p in spec.pieces),
+                                  0.01) == pytest.approx(5541, rel=0.1)  # the 1 cm T-shirt's pieces: 5,541
+    spec.spacing = 1e-5
+    with pytest.raises(PatternError, match=r"^garment 'tshirt': spacing 1e-05 m: 5,244,\d{3},\d{3} particles need "
+                                           r"about 29.3 TiB of memory \(estimate.*; use a larger spacing"):
+        build_garment(spec)
+    garment = (ROOT / "demos/garments/tshirt.toml").read_text().replace("spacing = 2.0", "spacing = 0.001")
+    assert garment != (ROOT / "demos/garments/tshirt.toml").read_text()
+    (tmp_path / "tiny.toml").write_text(garment)
+    scene = (ROOT / "demos/scenes/sew_tshirt.toml").read_text().replace("../garments/tshirt.toml", "tiny.toml")
+    (tmp_path / "scene.toml").write_text(scene)
+    with pytest.raises(SceneError, match=r"scene.toml: \[cloth\] garment tiny.toml: garment 'tshirt': spacing 1e-05 m"):
+        tc.load_scene(tmp_path / "scene.toml")
+
+
+def test_a_collider_cell_size_the_machine_cannot_hold_is_refused_before_the_grid_is_built(tmp_path):
+    """A tiny voxel over the mannequin is a grid of trillions of cells: refused naming the collider, its cell_size
+    and the estimate, from a scene file and from a dict alike."""
+    import taichi_cloth as tc
+
+    cell = "cell_size 0.0001 m (mesh mannequin): a voxel grid of 2,012,427,431,910 cells and 94,350,409,659 " \
+           "triangle-cell pairs needs about 15.2 TiB of memory (estimate)"
+    path = scene_file(tmp_path, extra='\n[[colliders]]\ntype = "mesh"\npath = "mannequin"\ncell_size = 1e-4\n')
+    with pytest.raises(SceneError, match=rf"scene.toml: \[\[colliders\]\] #1 {re.escape(cell)}"):
+        tc.load_scene(path)
+    with pytest.raises(SceneError, match=rf"^\[\[colliders\]\] #2 {re.escape(cell)}.*; use a larger cell_size"):
+        tc.Scene(tc.ClothBuilder.grid((0.2, 0.2), (4, 4)),
+                 colliders=[{"type": "standin"}, {"type": "mesh", "path": "mannequin", "cell_size": 1e-4}])
+    cells, pairs = guards.voxel_grid_size(np.eye(3), np.array([[0, 1, 2]]), 0.5, 0.0, 0.0)
+    # collision.grid.VoxelGrid's count: ceil(1.25 x 1 m / 0.5 m) + 2 = 5 cells per axis; the triangle's box over
+    # 0..1 m meets cells 0, 1 and 2 (its upper face lies on a cell boundary) per axis
+    assert (cells, pairs) == (5 ** 3, 3 ** 3)
+
+
 def test_a_tiny_step_is_refused_with_its_count_and_time(tmp_path):
     path = scene_file(tmp_path, dt=1e-12, frames=2)
     rc, _, err = cli("run", path, "--no-progress")
@@ -116,6 +162,53 @@ def test_a_long_run_is_announced_and_runs_with_yes(tmp_path):
         proc.kill()
         proc.wait()
     assert line.startswith("this run takes 20 frames of 1,666,665 steps (dt = 1e-08 s) = 33,333,300 steps, about ")
+
+
+def test_an_automatic_step_is_counted_too(tmp_path):
+    """dt = "auto" (here from --quality accurate: central differences at 0.9 x the stable step) was skipped by the
+    run-length guard: a stiff fine scene ran for hours unannounced. Its steps now come from the clock's own rule."""
+    stiff = 'material = { preset = "cotton", stretch = 1e6, shear = 1e6 }'
+    rc, _, err = cli("run", scene_file(tmp_path, res=32, frames=1000, material=stiff), "--no-progress",
+                     "--quality", "accurate")
+    one_error(rc, err, "the run is too long: 1000 frames of 10,617 steps (dt = auto: 1.57e-06 s, 0.9 x the stable "
+                       "step 1.74e-06 s) = 10,617,000 steps at least, about ", "needs --yes")
+
+
+def test_the_run_length_of_a_coarse_to_fine_cloth_is_that_of_its_finest_level():
+    """A multilevel cloth runs most of its steps on its finest level: the estimate takes its particles and, with
+    dt = "auto", its stable step, not those of the level the run starts on (the 5 mm T-shirt coarse to fine starts
+    on 5,541 particles, refines to 21,176, and was announced as the 5,541)."""
+    import taichi_cloth as tc
+
+    def scene(start):
+        cloth = tc.ClothBuilder.multilevel_grid((1.0, 1.0), (4, 4), 5, start_level=start)
+        return tc.Scene(cloth, integrator="explicit", dt="auto", pins=[{"near": [[-0.5, 0.5, 0], [0.5, 0.5, 0]]}])
+
+    coarse, fine = scene(0), scene(4)
+    assert coarse.model.data.n_particles < fine.model.data.n_particles == fine.model.capacity[0]
+    assert coarse.clock.substeps < fine.clock.substeps == guards.frame_plan(coarse)[0]
+    assert guards.frame_plan(coarse)[1] == pytest.approx(guards.frame_plan(fine)[1], rel=1e-9)
+    assert "of the finest level" in guards.frame_plan(coarse)[2]
+    assert guards.seconds_per_step(coarse) == guards.seconds_per_step(fine)
+
+
+def test_the_implicit_cost_per_particle_grows_with_the_cg_iterations():
+    """The implicit step's cost per particle is not one figure measured at one size: Jacobi's CG iterations grow
+    with the size (up to the cap), a cap raised lets them, and the collision stage costs per particle too."""
+    import taichi_cloth as tc
+
+    def sheet(**options):
+        return tc.Scene(tc.ClothBuilder.grid((1.0, 1.0), (8, 8)), integrator="implicit", dt=1 / 60, **options)
+
+    jacobi = sheet(integrator_options={"preconditioner": "jacobi"})
+    small, large = guards.implicit_cost(jacobi, 100)[0], guards.implicit_cost(jacobi, 10_000)[0]
+    assert small == pytest.approx(5e-7 + 40 * 3e-8) and large == pytest.approx(5e-7 + 200 * 3e-8)  # 200: the cap
+    raised = sheet(integrator_options={"preconditioner": "jacobi", "cg_max_iterations": 1000})
+    assert guards.implicit_cost(raised, 40_000)[0] == pytest.approx(5e-7 + 420 * 3e-8)  # 13 us, above the 8 it was
+    assert guards.implicit_cost(sheet(), 10_000)[0] == pytest.approx(5e-7 + 25 * 1.3e-7)  # auto: aggregation there
+    body = sheet(colliders=[{"type": "mesh", "path": "mannequin"}])
+    assert guards.seconds_per_step(body) - guards.seconds_per_step(sheet()) == pytest.approx(
+        64 * guards.MESH_COLLIDER_SECONDS_PER_PARTICLE + guards.SECONDS_PER_STEP_MESH_COLLIDER)
 
 
 # ------------------------------------------------------------------------------------------------ precision
@@ -182,16 +275,26 @@ def test_the_text_decoder_of_the_mesh_reader_is_installed():
 
 
 # ------------------------------------------------------------------------------------------------ no GPU
-def test_gpu_without_a_gpu_falls_back_to_the_cpu_with_one_line(tmp_path):
-    pytest.importorskip("taichi")
-    from taichi.lang.misc import is_arch_supported
-    import taichi as ti
+#: the CLI in a process where the GPU probes answer as faked: `loader` (the Vulkan loader found: Taichi's
+#: is_arch_supported(ti.vulkan) says yes) and `device` (the device probe's answer); CUDA and Metal absent
+FAKE_GPU = ("import sys, taichi as ti; from taichi_cloth import runtime; "
+            "runtime.is_arch_supported = lambda arch: {loader} and arch == ti.vulkan; "
+            "runtime.vulkan_device_usable = lambda: {device}; "
+            "from taichi_cloth.cli import main; sys.exit(main())")
 
-    if any(is_arch_supported(a) for a in (ti.cuda, ti.vulkan, ti.metal)):
-        pytest.skip("this machine has a GPU")
-    rc, out, err = cli("run", scene_file(tmp_path), "--no-progress", "--arch", "gpu")
+
+@pytest.mark.parametrize("loader, why", [
+    (False, ""),
+    (True, "; the Vulkan loader is installed but finds no usable device"),
+])
+def test_gpu_without_a_gpu_falls_back_to_the_cpu_with_one_line(tmp_path, loader, why):
+    """--arch gpu on a machine without a GPU, faked (so it is tested on every machine, one with a GPU included): no
+    backend at all, or a Vulkan loader whose device probe fails (Taichi's own check finds the loader, not a device,
+    and reported it as a GPU). Either way the run goes on on the CPU with one warning line."""
+    rc, out, err = cli("run", scene_file(tmp_path), "--no-progress", "--arch", "gpu",
+                       code=FAKE_GPU.format(loader=loader, device=False))
     assert rc == 0, err  # not 139 (the segmentation fault of probing OpenGL)
-    assert err == ["warning: no GPU found (no CUDA, Vulkan or Metal device): running on the CPU"]
+    assert err == [f"warning: no GPU found (no CUDA, Vulkan or Metal device{why}): running on the CPU"]
     assert "ran 1 frames" in out
 
 
@@ -351,6 +454,27 @@ def test_a_seam_corner_error_names_the_garment_file(tmp_path):
     (tmp_path / "scene.toml").write_text(scene)
     rc, _, err = cli("run", tmp_path / "scene.toml", "--no-progress", "--frames", "1")
     one_error(rc, err, "[cloth] garment bad.toml: seam 'left side': pattern piece 'front': no corner 'hem_X'")
+
+
+def test_a_body_analysis_error_names_the_garment_and_the_body_file(monkeypatch):
+    """A MeshError from the analysis of the body a garment is placed on names the garment and the body's file (it
+    was reported as the scene's [cloth.mesh] path, which a garment scene does not have)."""
+    import taichi_cloth as tc
+    from collision.mannequin import DEFAULT_PATH
+    from taichi_cloth.body import landmarks
+    from taichi_cloth.errors import MeshError
+
+    def no_armpit(*args):
+        raise MeshError("body mesh: no armpit found below 90% of the height")
+
+    monkeypatch.setattr(landmarks, "_armpit_height", no_armpit)
+    scene = ROOT / "demos/scenes/sew_tshirt.toml"
+    with pytest.raises(SceneError) as err:
+        tc.load_scene(scene)
+    assert str(err.value) == (f"{scene}: [cloth] garment ../garments/tshirt.toml: garment 'tshirt': placing its "
+                              f"pieces on the body {DEFAULT_PATH}: no armpit found below 90% of the height")
+    with pytest.raises(MeshError, match="^body mesh: no armpit"):  # a mesh of no file is still the body mesh
+        landmarks.Body.from_mesh(np.eye(3), np.array([[0, 1, 2], [0, 2, 1]]))
 
 
 # ------------------------------------------------------------------------------------------------ DXF corners

@@ -48,7 +48,8 @@ def test_the_implicit_step_and_the_controllers_read_nothing_more():
     cycle inside CG's one launch; Jacobi's: the sewing case below) iterating Newton to a tight tolerance: several
     Newton iterations per step, each decided on the device."""
     path = [[0.0, -0.2, 1.0, 0.0], [2.0, 0.2, 1.1, 0.0]]
-    sc = tc.Scene(sheet(), integrator="implicit", dt="auto", pins=[{"indices": [0]}, {"indices": [7], "path": path}],
+    sc = tc.Scene(sheet(), integrator="implicit", dt="auto",
+                  pins=[{"indices": [0]}, {"indices": [7], "keyframes": path}],
                   wind={"velocity": (0.0, 0.0, 2.0), "gust": 0.5}, stretch_limit={"max_strain": 0.1},
                   colliders=[{"type": "plane", "point": [0, 0.5, 0], "normal": [0, 1, 0]},
                              {"type": "capsule", "a": [-0.2, 0.8, 0.1], "b": [0.2, 0.8, 0.1], "radius": 0.05}],

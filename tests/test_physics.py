@@ -247,7 +247,8 @@ def test_fixed_pins_do_not_move_and_moving_pins_follow_their_keyframes(integrato
     n = 8
     keys = [[0.0, 0, 0, 0], [0.5, 0.1, 0.0, 0.0], [1.0, 0.1, 0.2, 0.0]]
     sc = tc.Scene(sheet(n, 0.4, plane="xy"), integrator=integrator, dt=1 / 200, fps=200,
-                  pins=[{"indices": [grid_top_corners(n)[0]]}, {"indices": [grid_top_corners(n)[1]], "path": keys}])
+                  pins=[{"indices": [grid_top_corners(n)[0]]},
+                        {"indices": [grid_top_corners(n)[1]], "keyframes": keys}])
     if sc.stable_dt is not None:
         sc.dt = 0.9 * sc.stable_dt
     fixed, moving = grid_top_corners(n)

@@ -406,17 +406,28 @@ class Body:
     # -------------------------------------------------------------------------------- construction
     @classmethod
     def from_mannequin(cls, mannequin=None) -> "Body":
-        """The Body of a collision.mannequin.Mannequin (default: load_mannequin(), the shipped CC0 body)."""
+        """The Body of a collision.mannequin.Mannequin (default: load_mannequin(), the shipped CC0 body); a
+        MeshError names its file."""
         if mannequin is None:
             mannequin = load_mannequin()
-        return cls.from_mesh(mannequin.vertices, mannequin.triangles)
+        source = f"body {mannequin.path}" if getattr(mannequin, "path", None) is not None else "body mesh"
+        return cls.from_mesh(mannequin.vertices, mannequin.triangles, source)
 
     @classmethod
-    def from_mesh(cls, vertices, triangles) -> "Body":
+    def from_mesh(cls, vertices, triangles, source: str = "body mesh") -> "Body":
         """Analyse any closed, outward-wound body mesh in the mannequin's pose convention (module docstring).
 
-        vertices (V,3) [m], triangles (T,3) int. Raises MeshError when the mesh is unusable or the arms cannot
-        be told from the torso."""
+        vertices (V,3) [m], triangles (T,3) int. Raises MeshError, its message starting with `source` (the body's
+        file, or what it is), when the mesh is unusable or the arms cannot be told from the torso."""
+        try:
+            return cls._analyse(vertices, triangles)
+        except MeshError as exc:
+            if source == "body mesh":
+                raise
+            raise MeshError(f"{source}: {str(exc).removeprefix('body mesh: ')}") from None
+
+    @classmethod
+    def _analyse(cls, vertices, triangles) -> "Body":
         validate_triangle_mesh(vertices, triangles, "body mesh")
         v = np.array(vertices, dtype=np.float64)
         t = np.array(triangles, dtype=np.int64)

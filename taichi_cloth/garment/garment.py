@@ -14,7 +14,8 @@ import numpy as np
 
 from ..body.landmarks import Body
 from ..cloth import ClothData, SpringKind, mesh_cloth
-from ..errors import PatternError
+from ..errors import MeshError, PatternError
+from ..guards import check_memory, sheet_particles
 from ..material import Material
 from ..material import material as as_material
 from .mesh import level_mesh, mesh_piece
@@ -33,17 +34,42 @@ class FreePlacement:
     v_axis: tuple = (0.0, 1.0, 0.0)
     at: tuple = (0.0, 0.0)
 
+    def __post_init__(self):
+        """PatternError naming the key and its value: an origin, axis or `at` that is not finite numbers, a zero
+        axis (it has no direction: the piece would be placed at NaN), or parallel axes."""
+        _vector("origin", self.origin, 3)
+        _vector("at", self.at, 2)
+        for key in ("u_axis", "v_axis"):
+            if not np.linalg.norm(_vector(key, getattr(self, key), 3)) > 0:
+                raise PatternError(f"free placement {key} must be a non-zero direction, got {getattr(self, key)!r}")
+        if np.linalg.norm(self._frame()[1]) < 1e-9:
+            raise PatternError(f"free placement: u_axis {self.u_axis!r} and v_axis {self.v_axis!r} are parallel")
+
+    def _frame(self) -> tuple[np.ndarray, np.ndarray]:
+        """(unit u_axis, v_axis less its part along u_axis): an orthonormal frame once the second is normalised,
+        so the piece is laid without stretch."""
+        eu = np.asarray(self.u_axis, dtype=np.float64)
+        eu = eu / np.linalg.norm(eu)
+        ev = np.asarray(self.v_axis, dtype=np.float64)
+        return eu, ev - ev.dot(eu) * eu
+
     def place(self, uv: np.ndarray) -> np.ndarray:
         """(n, 3) [m] positions of pattern points uv (n, 2) [m]."""
-        eu = np.asarray(self.u_axis, dtype=np.float64)
-        ev = np.asarray(self.v_axis, dtype=np.float64)
-        eu = eu / np.linalg.norm(eu)
-        ev = ev - ev.dot(eu) * eu  # keep the frame orthonormal so the piece is laid without stretch
-        if np.linalg.norm(ev) < 1e-9:
-            raise PatternError("free placement: u_axis and v_axis are parallel")
-        ev /= np.linalg.norm(ev)
+        eu, ev = self._frame()
+        ev = ev / np.linalg.norm(ev)
         d = np.asarray(uv, dtype=np.float64) - np.asarray(self.at, dtype=np.float64)
         return np.asarray(self.origin, dtype=np.float64) + d[:, :1] * eu + d[:, 1:2] * ev
+
+
+def _vector(key: str, value, n: int) -> np.ndarray:
+    """`value` as n finite floats, else PatternError naming the key and the value."""
+    try:
+        v = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        v = None
+    if v is None or v.shape != (n,) or not np.all(np.isfinite(v)):
+        raise PatternError(f"free placement {key} must be {n} finite numbers, got {value!r}")
+    return v
 
 
 def place_piece(uv: np.ndarray, placement, body) -> np.ndarray:
@@ -77,10 +103,10 @@ class GarmentSpec:
     """Everything a garment file holds (our equivalent of Hsiao 2006's .gar file). Lengths in metres.
 
     name; pieces: PatternPiece list; seams: Seam list; placements: piece name -> Placement (around the body)
-    or FreePlacement (every piece needs one); fixed: FixedPoint list; material: preset name or Material; spacing: particle spacing on the piece
-    boundaries [m] (the interior lattice has the same cell); levels: 4-8 levels meshed per piece (the finest
-    is simulated; the spacing is that of the finest level); resolution: the RESOLUTIONS preset that set the
-    spacing, if one did (None: the file's spacing).
+    or FreePlacement (every piece needs one); fixed: FixedPoint list; material: preset name or Material;
+    spacing: particle spacing on the piece boundaries [m] (the interior lattice has the same cell); levels: 4-8
+    levels meshed per piece (the finest is simulated; the spacing is that of the finest level); resolution: the
+    RESOLUTIONS preset that set the spacing, if one did (None: the file's spacing).
     """
 
     name: str
@@ -250,13 +276,22 @@ class GarmentLevelPlan:
 
 def plan_garment_levels(spec: GarmentSpec, body: Body | None = None,
                         seam_stiffness: float | None = None) -> GarmentLevelPlan:
-    """Mesh the pieces of `spec` as hierarchies and plan their seams (see build_garment_levels)."""
+    """Mesh the pieces of `spec` as hierarchies and plan their seams (see build_garment_levels). A spacing that would
+    mesh more particles than the machine has memory for is refused first (PatternError naming the spacing)."""
     spec.validate()
+    check_memory(sheet_particles(sum(p.area() for p in spec.pieces), sum(p.perimeter() for p in spec.pieces),
+                                 spec.spacing, spec.levels),
+                 f"garment {spec.name!r}: spacing {spec.spacing:.3g} m" + (f" ({spec.levels} levels)"
+                                                                         if spec.levels > 1 else ""),
+                 error=PatternError, advice="use a larger spacing (or resolution = \"draft\", \"fit\", \"fine\")")
     mat = as_material(spec.material)
     needs_body = any(not isinstance(p, FreePlacement) for p in spec.placements.values()) or any(
         f.anchor for f in spec.fixed)
     if body is None and needs_body:
-        body = Body.from_mannequin()
+        try:
+            body = Body.from_mannequin()
+        except MeshError as exc:  # its message names the body's file
+            raise MeshError(f"garment {spec.name!r}: placing its pieces on the {exc}") from None
     pieces = {p.name: p for p in spec.pieces}
     tol = spec.spacing / 200.0
     lengths = {n: np.array([s.length(tol / 10) for s in p.segments]) for n, p in pieces.items()}

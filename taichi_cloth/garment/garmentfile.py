@@ -45,7 +45,8 @@ from pathlib import Path
 
 from ..errors import PatternError
 from ..material import Material
-from ..schema import MATERIAL_TABLE, Array, Field, Table, Validator, material_of, nonneg, positive, read_toml
+from ..schema import (MATERIAL_TABLE, Array, Field, Table, Validator, material_of, nonneg, nonzero, positive,
+                      read_toml)
 from .garment import RESOLUTIONS, FixedPoint, FreePlacement, GarmentSpec
 from .pattern import PatternPiece, unit_scale
 from .placement import Placement
@@ -67,8 +68,8 @@ GARMENT_SCHEMA = Table({
         "placement": Table({"anchor": Field("str", None), "at": Field("vec2", None),
                             "offset": Field("number", None, nonneg), "wrap": Field("bool", True),
                             "height": Field("number", 0.0), "angle": Field("number", 0.0),
-                            "origin": Field("vec3", None), "u_axis": Field("vec3", [1.0, 0.0, 0.0]),
-                            "v_axis": Field("vec3", [0.0, 1.0, 0.0])}, required=True)})),
+                            "origin": Field("vec3", None), "u_axis": Field("vec3", [1.0, 0.0, 0.0], nonzero),
+                            "v_axis": Field("vec3", [0.0, 1.0, 0.0], nonzero)}, required=True)})),
     "seams": Array(Table({"name": Field("str", None), "a": _SIDE, "b": _SIDE,
                           "tolerance": Field("number", DEFAULT_LENGTH_TOLERANCE, positive)})),
     "fixed": Array(Table({"piece": Field("str"), "point": Field("point"), "anchor": Field("str", None),
@@ -95,8 +96,11 @@ def _placement(pl: dict, s: float, where: str):
         raise PatternError(f"{where}: give either anchor (a body anchor) or origin (a point in space), not "
                            f"{'both' if pl['anchor'] else 'neither'}")
     if pl["origin"] is not None:
-        return FreePlacement(tuple(s * c for c in pl["origin"]), tuple(pl["u_axis"]), tuple(pl["v_axis"]),
-                             at or (0.0, 0.0))
+        try:
+            return FreePlacement(tuple(s * c for c in pl["origin"]), tuple(pl["u_axis"]), tuple(pl["v_axis"]),
+                                 at or (0.0, 0.0))
+        except PatternError as exc:  # parallel axes (a zero one is refused by the schema)
+            raise PatternError(f"{where}: {str(exc).removeprefix('free placement: ')}") from None
     return Placement(anchor=pl["anchor"], at=at, **({} if pl["offset"] is None else {"offset": s * pl["offset"]}),
                      wrap=pl["wrap"], height=s * pl["height"], angle=pl["angle"])
 
