@@ -47,7 +47,7 @@ class VoxelGrid:
         pairs = self._count_pairs_np(vertices_np, triangles_np)
         if hashed:
             self.dims = (0, 0, 0)
-            self.n_cells = _prime_at_least(2 * int(grow * grow * pairs) + 1031)
+            self.n_cells = _prime_at_least(int(hashed_cells(pairs, grow)))
         else:
             lo, hi = vertices_np.min(0) - margin, vertices_np.max(0) + margin
             self.dims = tuple(int(math.ceil(grow * (h - l) / cell_size)) + 2 for l, h in zip(lo, hi))
@@ -79,12 +79,7 @@ class VoxelGrid:
         return int(span.prod(1).sum())
 
     def _pairs_bound_np(self, v, t) -> int:
-        """(triangle, cell) pairs of the mesh in any pose that keeps its edge lengths, each triangle's box swept by
-        up to a cell in a step: a box of extent e along an axis meets at most floor(e / cell) + 2 cells, and e is at
-        most the longest edge plus twice the pad."""
-        longest = np.linalg.norm(v[t] - v[t[:, [1, 2, 0]]], axis=2).max(1)
-        per_axis = np.floor((longest + 2 * self.pad) / self.cell_size) + (3 if self.swept else 2)
-        return int((per_axis ** 3).sum())
+        return int(pairs_bound(v, t, self.cell_size, self.pad, self.swept))
 
     def build(self, vertices_np: np.ndarray | None = None) -> int:
         """(Re)bin every triangle; call after the mesh moved. The grid is re-centred on the mesh bounds (from
@@ -273,6 +268,21 @@ class VoxelGrid:
         if len(cells) == 0:
             return np.zeros(0, np.int64)
         return np.unique(np.concatenate([tris[start[c]:start[c + 1]] for c in cells]))
+
+
+def pairs_bound(v: np.ndarray, t: np.ndarray, cell_size: float, pad: float, swept: bool = True) -> float:
+    """(triangle, cell) pairs of mesh (v (V,3) [m], t (T,3)) in any pose that keeps its edge lengths, each triangle's
+    box widened by `pad` [m] and (swept) moved by up to a cell in a step: a box of extent e along an axis meets at
+    most floor(e / cell) + 2 cells, and e is at most the longest edge plus twice the pad. A float: a tiny cell can
+    make it too large for an integer."""
+    longest = np.linalg.norm(v[t] - v[t[:, [1, 2, 0]]], axis=2).max(1)
+    per_axis = np.floor((longest + 2 * pad) / cell_size) + (3 if swept else 2)
+    return float((per_axis ** 3).sum())
+
+
+def hashed_cells(pairs: float, grow: float = 1.25) -> float:
+    """The cells of a hashed grid sized for `pairs` (triangle, cell) pairs (VoxelGrid; a prime near this)."""
+    return 2 * grow * grow * pairs + 1031
 
 
 def _prime_at_least(n: int) -> int:

@@ -123,7 +123,7 @@ class SelfCollision(ParticleCollider):
         self.tau[None] = self.thickness
 
     def _thickness_for(self, x: np.ndarray, t: np.ndarray) -> float:
-        return self.fixed_thickness if self.fixed_thickness is not None else 0.25 * _mean_edge(x, t)
+        return self.fixed_thickness if self.fixed_thickness is not None else default_thickness(x, t)
 
     def _on_attach(self) -> None:
         # cloth-cloth contacts are not handed to the solver: contact_normal holds the bodies' contacts, read only
@@ -854,6 +854,11 @@ class SelfCollision(ParticleCollider):
 
     def describe(self) -> dict:
         return {"kind": "self"}
+
+
+def default_thickness(x: np.ndarray, t: np.ndarray) -> float:
+    """The default thickness [m] of a cloth (P,3) [m] with triangles t (T,3): a quarter of its mean edge."""
+    return 0.25 * _mean_edge(np.asarray(x, dtype=np.float64), np.asarray(t, dtype=np.int64))
 
 
 def _mean_edge(x: np.ndarray, t: np.ndarray) -> float:

@@ -26,6 +26,7 @@ from .forces import ForceModel
 from .garment.garment import GarmentCloth
 from .garment.levels import MultilevelGarment
 from .garment.sewing import Sewing, SewingOptions
+from .guards import check_self_collision_grid
 from .integrators import integrator_class
 from .linear import NestedLevels
 from .model import Model, State
@@ -130,6 +131,9 @@ def assemble(cloth, *, name: str = "cloth", integrator: str = DEFAULT_INTEGRATOR
         seams = np.unique(source.garment.seam_pairs) if source.garment is not None else ()
         # the mesh in use first: its edges give the starting thickness and its particles the seam flags
         shapes = [(d.positions, d.triangles) for d in [model.data] + [d for d in source.levels if d is not model.data]]
+        if options.get("cell_size"):
+            check_self_collision_grid(shapes, options["cell_size"], options.get("thickness"),
+                                      f"self_collision cell_size {options['cell_size']} m")
         objects.append(SelfCollision(model.triangles, model.n_triangles, shapes, seam_particles=seams, **options))
     collide = contacts = None
     if objects:

@@ -188,7 +188,23 @@ def check_voxel_grid(vertices, triangles, cell_size: float, pad: float, margin: 
     """Refuse (SceneError) a collider voxel grid whose cells or pairs outgrow the machine's memory or Taichi's
     32-bit field indices, before it is allocated. `what` names the collider and its cell_size key."""
     cells, pairs = voxel_grid_size(vertices, triangles, cell_size, pad, margin)
-    need = cells * BYTES_PER_VOXEL + pairs * BYTES_PER_VOXEL_PAIR
+    _check_cells_and_pairs(cells, pairs, BYTES_PER_VOXEL_PAIR, what, available)
+
+
+def check_self_collision_grid(shapes, cell_size: float, thickness: float | None, what: str,
+                              available: int | None = None) -> None:
+    """The same for self-collision's hashed grid (collision.self_collision): sized for every mesh in `shapes`
+    ((positions (P,3) [m], triangles (T,3)) each) in any pose, its triangles' boxes padded by their reach."""
+    from collision.grid import hashed_cells, pairs_bound
+    from collision.self_collision import REUSE_MARGIN, default_thickness
+
+    pairs = max(pairs_bound(np.asarray(x, np.float64), np.asarray(t, np.int64), cell_size,
+                            (1 + REUSE_MARGIN) * (thickness or default_thickness(x, t))) for x, t in shapes)
+    _check_cells_and_pairs(hashed_cells(pairs), pairs, 4, what, available)  # sized to the bound: no growth
+
+
+def _check_cells_and_pairs(cells: float, pairs: float, pair_bytes: float, what: str, available: int | None) -> None:
+    need = cells * BYTES_PER_VOXEL + pairs * pair_bytes
     have = available_memory() if available is None else available
     grid = f"a voxel grid of {cells:,.0f} cells and {pairs:,.0f} triangle-cell pairs"
     if need > have:

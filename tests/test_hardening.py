@@ -141,6 +141,18 @@ def test_a_collider_cell_size_the_machine_cannot_hold_is_refused_before_the_grid
     assert (cells, pairs) == (5 ** 3, 3 ** 3)
 
 
+def test_a_self_collision_cell_size_the_machine_cannot_hold_is_refused_before_the_grid_is_built():
+    """Self-collision's hashed grid is sized for the cloth in any pose: a 10 um cell over a 2 cm sheet asks for
+    trillions of pairs, refused naming the key; the default cell builds."""
+    import taichi_cloth as tc
+
+    sheet = tc.ClothBuilder.grid((0.2, 0.2), (11, 11))
+    with pytest.raises(SceneError, match=r"^self_collision cell_size 1e-05 m: a voxel grid of [\d,]+ cells and "
+                                         r"[\d,]+ triangle-cell pairs .*use a larger cell_size"):
+        tc.Scene(sheet, self_collision={"cell_size": 1e-5})
+    tc.Scene(sheet, self_collision={"cell_size": 0.03})
+
+
 def test_a_tiny_step_is_refused_with_its_count_and_time(tmp_path):
     path = scene_file(tmp_path, dt=1e-12, frames=2)
     rc, _, err = cli("run", path, "--no-progress")
