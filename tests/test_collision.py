@@ -171,7 +171,7 @@ def drop_cloth(integrator, colliders, n=12, size=0.5, center=(0.0, 0.8, 0.0), v0
 
 @pytest.mark.slow
 @pytest.mark.parametrize("integrator", INTEGRATORS)
-def test_no_penetration_sphere_box_mannequin(integrator, quiet):
+def test_no_penetration_sphere_box_mannequin(integrator):
     """A sheet thrown down at 1 m/s onto a sphere (analytic) and a box (mesh) side by side, and one onto the
     mannequin (mesh), ends with every particle outside each (signed distance >= -0.5 mm), having really reached
     each body. (Sphere and box share a scene, 4.8 cm spacing as the separate 0.5 m sheets had 4.5: a scene's cost
