@@ -50,7 +50,7 @@ class VoxelGrid:
             self.n_cells = _prime_at_least(int(hashed_cells(pairs, grow)))
         else:
             lo, hi = vertices_np.min(0) - margin, vertices_np.max(0) + margin
-            self.dims = tuple(int(math.ceil(grow * (h - l) / cell_size)) + 2 for l, h in zip(lo, hi))
+            self.dims = tuple(int(math.ceil(grow * (h - a) / cell_size)) + 2 for a, h in zip(lo, hi))
             self.n_cells = self.dims[0] * self.dims[1] * self.dims[2]
         n_cells = self.n_cells
         if hashed or self.swept:
@@ -251,23 +251,6 @@ class VoxelGrid:
                     self.cell_triangles[b + 1] = self.cell_triangles[b]
                     b -= 1
                 self.cell_triangles[b + 1] = t
-
-    # ------------------------------------------------------------------ host-side inspection (tests)
-    # (dense grids only)
-    def triangles_in_box(self, lo, hi) -> np.ndarray:
-        """Sorted unique triangle ids binned in the cells overlapping box [lo, hi] [m] (numpy, for tests)."""
-        origin = self.origin.to_numpy()
-        cmin = np.maximum(np.floor((np.asarray(lo) - origin) / self.cell_size).astype(int), 0)
-        cmax = np.minimum(np.floor((np.asarray(hi) - origin) / self.cell_size).astype(int), np.array(self.dims) - 1)
-        if np.any(cmin > cmax):
-            return np.zeros(0, np.int64)
-        start = self.cell_start.to_numpy()
-        tris = self.cell_triangles.to_numpy()
-        ii, jj, kk = np.meshgrid(*[np.arange(a, b + 1) for a, b in zip(cmin, cmax)], indexing="ij")
-        cells = ((kk * self.dims[1] + jj) * self.dims[0] + ii).ravel()
-        if len(cells) == 0:
-            return np.zeros(0, np.int64)
-        return np.unique(np.concatenate([tris[start[c]:start[c + 1]] for c in cells]))
 
 
 def pairs_bound(v: np.ndarray, t: np.ndarray, cell_size: float, pad: float, swept: bool = True) -> float:

@@ -4,7 +4,7 @@
            [--arch cpu|gpu]
 
 Writes DIR/drape_on_mannequin.rrd (the body logged once) and the final mesh, and prints the collision
-counters: triangle tests done by the fuzzy ranking against the candidates in the touched voxels.
+counters: the crossing tests done against the candidates in the touched voxels (docs/collision.md, cost).
 """
 from _common import SCENES, arguments, ends
 from taichi_cloth.cli import run_scene_file

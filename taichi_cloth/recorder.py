@@ -445,10 +445,6 @@ class Recorder:
                              radii=0.004)
         rec.log("pattern/seams/directions", arrows, static=True)
 
-    def log_points(self, entity: str, points, radius: float = 0.01, color=PIN_COLOR, static: bool = True) -> None:
-        """Extra points (e.g. markers), static by default."""
-        self.stream.log(entity, rr.Points3D(np.asarray(points, np.float32), radii=radius, colors=color), static=static)
-
     # ------------------------------------------------------------------ studies (benchmark results)
     def log_document(self, entity: str, markdown: str) -> None:
         """A markdown text (e.g. a benchmark's report), static."""

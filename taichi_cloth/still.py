@@ -41,6 +41,9 @@ AMBIENT, KEY_WEIGHT, FILL_WEIGHT = 0.22, 0.68, 0.18
 SPECULAR, SHININESS = (0.06, 0.12), 24.0  # (cloth, body): a matte cloth, a slightly glossier body
 #: the panels' background, top and bottom of a vertical gradient (dark: the white of no strain stands out)
 BACKGROUND = ((0.33, 0.35, 0.39), (0.14, 0.15, 0.17))
+#: the picture's layout [px]: between two panels, left and right of them, above them (the title and the panels'
+#: names) and below them (the strain legend)
+GAP_PX, SIDE_PX, TOP_PX, BOTTOM_PX = 16, 16, 64, 110
 #: candidate pixels [count] a rasterizer pass handles at once (its memory: about 100 bytes each)
 CHUNK = 1 << 20
 #: the bounding-box sizes [px] triangles are grouped by in rasterize (a box is rounded up to the next)
@@ -267,7 +270,7 @@ def compose(panels: list[Panel], path, title: str, colormap) -> Path:
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    gap, side, top, bottom, dpi = 16, 16, 64, 110, 100
+    gap, side, top, bottom, dpi = GAP_PX, SIDE_PX, TOP_PX, BOTTOM_PX, 100
     H = max(p.rgb.shape[0] for p in panels)
     width = sum(p.rgb.shape[1] for p in panels) + gap * (len(panels) - 1) + 2 * side
     height = H + top + bottom

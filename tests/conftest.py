@@ -1,6 +1,5 @@
 """One Taichi runtime (ti.cpu) for the whole session: re-initialising frees fields and costs seconds."""
 import os
-import warnings
 
 import numpy as np
 import pytest
@@ -24,14 +23,6 @@ def taichi_cpu():
         options["offline_cache_file_path"] = f"{base}-{worker}"
     tc.init("cpu", **options)
     yield
-
-
-@pytest.fixture
-def quiet():
-    """Silence the engine's expected warnings (step guard, unstable variants) inside a test."""
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        yield
 
 
 def sliding_normals(contacts, n: int) -> np.ndarray:

@@ -2,6 +2,8 @@
 multigrid-preconditioned CG solve equals a direct sparse solve of the same filtered Newton system of backward Euler
 (scipy, float64), with pins and with contacts; it equals the Jacobi-preconditioned step; a V-cycle is the
 symmetric operator CG needs; the scene picks the preconditioner the cloth allows and says which."""
+import dataclasses
+
 import numpy as np
 import pytest
 import taichi as ti
@@ -11,6 +13,7 @@ from conftest import current_level, damping_matrix, sliding_normals, spring_forc
 from taichi_cloth.linear import ConstraintFilter
 from taichi_cloth.linear.aggregation import AggregationMultigrid
 from taichi_cloth.linear.level_cycle import copies
+from taichi_cloth.linear.policy import AGGREGATION_FROM
 from taichi_cloth.multilevel_cloth import multilevel_grid
 from taichi_cloth.stability import stiffness_matrix
 
@@ -159,6 +162,16 @@ def assert_symmetric_positive(mg, rng, rows) -> np.ndarray:
     return z1
 
 
+def without_last_particle(cloth):
+    """ClothData `cloth` less its last particle, with the springs and triangles that use it (no grid shape)."""
+    last = cloth.n_particles - 1
+    keep = np.all(cloth.springs != last, axis=1)
+    return dataclasses.replace(cloth, positions=cloth.positions[:last], mass=cloth.mass[:last],
+                               springs=cloth.springs[keep], rest_length=cloth.rest_length[keep],
+                               stiffness=cloth.stiffness[keep], damping=cloth.damping[keep], kind=cloth.kind[keep],
+                               triangles=cloth.triangles[np.all(cloth.triangles != last, axis=1)], grid_shape=None)
+
+
 def test_the_scene_picks_the_preconditioner_the_cloth_allows_and_says_which():
     ml = tc.Scene(multilevel_grid((0.5, 0.5), (2, 2), 3, "cotton", center=(0, 1, 0)), dt=H,
                   multilevel={"refine": False})
@@ -167,10 +180,20 @@ def test_the_scene_picks_the_preconditioner_the_cloth_allows_and_says_which():
     grid = tc.Scene(tc.ClothBuilder.grid((0.5, 0.5), (6, 6)), dt=H)
     assert grid.integrator.policy.current is grid.integrator.policy.jacobi
     assert "Jacobi-preconditioned CG" in grid.run(0, progress=False).format()
-    big = tc.Scene(tc.ClothBuilder.grid((1.0, 1.0), (45, 45)), dt=H)  # 2,025 particles: auto aggregates
+    # `auto` aggregates a cloth off 4-8 levels from AGGREGATION_FROM = 2,000 particles on: a 40 x 50 grid has
+    # exactly 2,000, and the same grid less its last particle (and that particle's springs and triangles) 1,999
+    assert AGGREGATION_FROM == 2000
+    sheet = tc.ClothBuilder.grid((1.0, 1.0), (40, 50))
+    assert sheet.n_particles == 2000
+    big = tc.Scene(sheet, dt=H)
     assert isinstance(big.integrator.policy.current, AggregationMultigrid)
     assert big.integrator.detail.startswith("CG preconditioned by V-cycles over ")
-    assert "aggregation levels (2025 > " in big.integrator.detail
+    assert "aggregation levels (2000 > " in big.integrator.detail
+    below = tc.Scene(without_last_particle(sheet), dt=H)
+    assert below.model.data.n_particles == 1999
+    assert below.integrator.policy.current is below.integrator.policy.jacobi
+    assert below.integrator.policy.apart is None  # the aggregation cycle not even built
+    assert "Jacobi-preconditioned CG" in below.run(0, progress=False).format()
     asked = tc.Scene(tc.ClothBuilder.grid((0.5, 0.5), (6, 6)), dt=H, integrator_options={"preconditioner": "multigrid"})
     assert isinstance(asked.integrator.policy.current, AggregationMultigrid)
     assert "V-cycles over 2 aggregation levels (36 > 8)" in asked.run(0, progress=False).format()

@@ -1,4 +1,6 @@
-"""Quality presets (`quality = "..."`, `run --quality`): the shipped file, and what a preset does to a scene."""
+"""Quality presets (`quality = "..."`, `run --quality`): the shipped file, the cheapest preset's error measured
+again, and what a preset does to a scene."""
+import tomllib
 from pathlib import Path
 
 import pytest
@@ -21,7 +23,34 @@ def test_the_shipped_presets_trade_cost_for_error_in_order():
     cost = [presets[q].measured["wall_per_sim_s_all_scenes"] for q in QUALITIES]
     error = [presets[q].measured["worst_rms_error_m"] for q in QUALITIES]
     assert cost == sorted(cost) and error == sorted(error, reverse=True)
-    assert error[-1] <= 1e-3 and error[0] <= 0.05  # the targets they were chosen for (met when measured)
+    assert error[-1] <= 1e-3 and error[0] <= 0.05  # the targets they were chosen for (as the file says: read back)
+
+
+@pytest.mark.slow
+def test_the_cheapest_preset_meets_its_target_measured_again():
+    """The file's `met = true` is what the study wrote: measure the cheapest preset again, as `bench tradeoff` does
+    (its functions), on its smallest scene. The hanging sheet of the study (4x4 base cells, 5 levels, the reference
+    on the finest: implicit, float64, CG 1e-6, h = 1e-4 s), the preset at its level and step from rest, the RMS
+    vertex distance over the samples (every 0.1 s) up to where the reference's own error (against 2h) stays under
+    1 mm: 0.4 s on this sheet. Measured 2.20 cm against the 5 cm target (docs/speed-accuracy.md)."""
+    from benchmarks import tradeoff as tr
+
+    presets = load_presets()
+    p = min(presets.values(), key=lambda p: p.measured["wall_per_sim_s_all_scenes"])
+    assert p.name == "preview"
+    variant = next(v for v, (name, opts) in tr.VARIANTS.items() if (name, opts) == (p.integrator, p.options))
+    n_levels = 5
+    study = tr.run_study(["hanging"], [variant], levels_below=(-p.level,), base=4, n_levels=n_levels, sim_time=0.4,
+                         samples=4, ref_dt=1e-4, dts=(p.dt,) if p.dt is not None else (),
+                         fractions=(p.dt_bound_fraction,) if p.dt_bound_fraction is not None else (),
+                         explicit_tried=(), keep_shapes=False, progress=False, log=lambda *a: None)
+    ref = study.references["hanging"]
+    assert ref.window == 4 and ref.window_time == pytest.approx(0.4)  # the window the study measured on this sheet
+    [row] = study.rows
+    assert row["stable"] and row["level"] == n_levels + p.level and row["particles"] == 81
+    target = tomllib.loads(PRESETS_PATH.read_text())[p.name]["target_rms_error"]
+    assert target == tr.PRESET_ERRORS[p.name] and row["rms_error"] <= target
+    assert row["rms_error"] > 10 * ref.floor["rms_error"]  # an error of the preset, not of the reference
 
 
 def test_coarsening_a_grid_follows_the_4_8_spacing():

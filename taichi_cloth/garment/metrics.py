@@ -63,12 +63,6 @@ class GarmentQuality:
         lines += [f"note: {n}" for n in self.notes]
         return "\n".join(lines)
 
-    def as_dict(self) -> dict:
-        return {"pieces": [{"name": p.name, "area_error": p.area_error, "boundary_error": p.boundary_error,
-                            "max_strain": p.max_strain, "mean_strain": p.mean_strain} for p in self.pieces],
-                "seam_gap_max": self.seam_gap_max, "seam_gap_mean": self.seam_gap_mean,
-                "penetrations": self.penetrations, "static": self.static, "max_speed": self.max_speed}
-
 
 def piece_quality(garment, current_of: np.ndarray, x: np.ndarray) -> list[PieceQuality]:
     """PieceQuality of every piece of `garment` (a GarmentCloth) for current positions x ((P,3) [m]) in the
