@@ -53,8 +53,13 @@ import os
 
 import numpy as np
 
+from collision.grid import hashed_cells, pairs_bound
+from collision.self_collision import REUSE_MARGIN, default_thickness
+
 from .clock import DIVIDES, frame_steps
 from .errors import SceneError
+from .linear.policy import AGGREGATION_FROM
+from .pins import pinned_mask
 from .stability import omega_max_estimate, stable_dt
 
 #: peak resident bytes per particle of a built and running cloth (see the module docstring)
@@ -195,9 +200,6 @@ def check_self_collision_grid(shapes, cell_size: float, thickness: float | None,
                               available: int | None = None) -> None:
     """The same for self-collision's hashed grid (collision.self_collision): sized for every mesh in `shapes`
     ((positions (P,3) [m], triangles (T,3)) each) in any pose, its triangles' boxes padded by their reach."""
-    from collision.grid import hashed_cells, pairs_bound
-    from collision.self_collision import REUSE_MARGIN, default_thickness
-
     pairs = max(pairs_bound(np.asarray(x, np.float64), np.asarray(t, np.int64), cell_size,
                             (1 + REUSE_MARGIN) * (thickness or default_thickness(x, t))) for x, t in shapes)
     _check_cells_and_pairs(hashed_cells(pairs), pairs, 4, what, available)  # sized to the bound: no growth
@@ -219,7 +221,6 @@ def frame_plan(scene) -> tuple[int, float, str]:
     """(steps a frame, dt [s], how dt was chosen) on the finest level the run reaches (module docstring: how long a
     run takes). A fixed dt: the base step (a coarse level's may be dt_growth times longer); dt = "auto": the
     adaptive clock's rule at the stable step of the finest level."""
-    from .pins import pinned_mask  # Taichi's: the builders import this module without it
 
     clock = scene.clock
     if not clock.auto:
@@ -253,7 +254,6 @@ def run_steps(scene, frames: int) -> int:
 def implicit_cost(scene, particles: int) -> tuple[float, float]:
     """([s] a step and a particle, [s] a step) of the implicit integrator's Newton step and CG at `particles`
     (module docstring): the preconditioner auto or the option picks there, its iterations, at most the cap."""
-    from .linear.policy import AGGREGATION_FROM
 
     opts = scene.integrator.options
     policy = getattr(scene.integrator, "policy", None)
