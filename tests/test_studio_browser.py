@@ -64,9 +64,11 @@ def folder(tmp_path_factory) -> Path:
 def studio(folder):
     """The studio's address; the server (its own process group) ends with the module."""
     port = _free_port()
+    # as from an activated venv: its `rerun` on the PATH, so the page names the recording's viewer as `rerun`
+    env = dict(os.environ, PATH=os.pathsep.join([str(Path(sys.executable).parent), os.environ.get("PATH", "")]))
     proc = subprocess.Popen([sys.executable, "-m", "taichi_cloth", "studio", "tshirt.dxf", "--no-browser",
                              "--port", str(port)], cwd=folder, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                            text=True, start_new_session=True)
+                            text=True, start_new_session=True, env=env)
     try:
         said = []
         for line in proc.stdout:  # Taichi's banner first, then the studio's address
@@ -142,6 +144,30 @@ def test_seams_by_clicking_placement_and_save_give_the_shipped_set_up(page, fold
     names = page.eval_on_selector_all("g.piece", "gs => gs.map((g) => g.dataset.piece)")
     assert names == ["front", "back", "sleeve_L", "sleeve_R"]
     assert page.locator("circle.corner").count() == 8 + 8 + 5 + 5
+
+    # a span picked by its two corners, two segments long here, on each piece; then taken back
+    for piece, start, end in (("front", "hem_L", "shoulder_L"), ("back", "hem_L", "shoulder_L")):
+        for corner in (start, end):
+            page.click(f'circle.corner[data-piece="{piece}"][data-corner="{corner}"]')
+    wait_seams(page, 1)
+    assert "front hem_L → shoulder_L (48.7 cm)" in page.inner_text("#seam-list li")
+    assert page.evaluate("state.seams[0].a.points.length") > 10  # along both segments, the armhole curve included
+    page.click("#undo-btn")
+    wait_seams(page, 0)
+    # sides too different in length: kept, shown red with both lengths, until its tolerance takes them
+    click_side(page, {"piece": "front", "from": "hem_R", "to": "hem_L"})
+    click_side(page, {"piece": "sleeve_L", "from": "hem_F", "to": "hem_B"})
+    page.wait_for_selector("#seam-list li.mismatch")
+    assert "lengths 52.0 and 30.0 cm: 42.3 % apart (tolerance 10 %)" in page.inner_text("#seam-list li.mismatch")
+    assert "52.0 cm" in page.inner_text("#warnings") and "30.0 cm" in page.inner_text("#warnings")
+    page.fill("#seam-list .seam-tol", "50")
+    page.press("#seam-list .seam-tol", "Enter")
+    page.wait_for_function("state.seams.length === 1 && state.seams[0].pairs")
+    assert page.locator("#seam-list li.mismatch").count() == 0
+    page.click("#undo-btn")
+    page.wait_for_function("state.seams.length === 1 && !state.seams[0].pairs")
+    page.click("#undo-btn")
+    wait_seams(page, 0)
 
     for k, seam in enumerate(SHIPPED["seams"]):
         click_side(page, seam["a"])
@@ -225,7 +251,7 @@ def test_a_quick_drape_shows_its_still_picture(page, shots):
     assert status.startswith("done: 90 frames, quick, spacing 4 cm"), status
     assert page.evaluate("document.getElementById('drape-progress').value") == 1
     assert page.locator("#drape-result table tr").count() == 5  # the quality table: a header and four pieces
-    assert "rerun" in page.inner_text("#drape-result code")
+    assert page.inner_text("#drape-result code") == "rerun studio-drape/tshirt_dxf-out/tshirt_dxf.rrd"
     page.locator("#drape-result img.drape-still").scroll_into_view_if_needed()
     page.screenshot(path=str(shots / "studio-drape.png"))
 

@@ -259,9 +259,13 @@ function drawSeamList() {
     const side = (s) => `${s.piece} ${s.from} → ${s.to} (${s.length.toFixed(1)} ${state.units})`;
     li.innerHTML = `<span class="swatch" style="background:${colour}">${seam.number}</span>` +
       `<input class="seam-name"> <button class="flip-a" title="reverse side a">flip a</button> ` +
-      `<button class="flip-b" title="reverse side b">flip b</button> <button class="delete">delete</button>` +
-      `<span class="sides"></span>`;
+      `<button class="flip-b" title="reverse side b">flip b</button> <button class="delete">delete</button> ` +
+      `<label class="tol" title="the largest length difference of the sides it sews">± <input class="seam-tol" ` +
+      `type="number" min="0" step="1"> %</label><span class="sides"></span>`;
     li.querySelector(".seam-name").value = seam.name;
+    li.querySelector(".seam-tol").value = +(100 * seam.tolerance).toFixed(3);
+    li.querySelector(".seam-tol").addEventListener("change", (ev) =>
+      api("PATCH", `/api/seams/${i}`, {tolerance: Number(ev.target.value) / 100}));
     li.querySelector(".sides").textContent = `a: ${side(seam.a)} · b: ${side(seam.b)}`;
     if (!seam.pairs) {
       const w = document.createElement("span");
