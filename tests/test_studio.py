@@ -246,6 +246,9 @@ def test_an_oversize_upload_is_refused_with_413(folder):
     r = c.post("/api/upload", files={"file": ("big.dxf", b"0" * (MAX_UPLOAD + 200_000))})
     assert r.status_code == 413 and "5 MB" in r.json()["error"]
     assert not (folder / "big.dxf").exists()
+    r = c.post("/api/seams", content=b"{" + b" " * (2 * 1024 * 1024) + b"}",
+               headers={"content-type": "application/json"})
+    assert r.status_code == 413  # an edit too large to be one
 
 
 def test_paths_outside_the_folder_are_refused(folder, tmp_path):

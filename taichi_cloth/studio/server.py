@@ -91,7 +91,14 @@ class Studio:
         return self.job.status()
 
 
+#: [bytes] the largest JSON body a route reads (an edit is a few hundred bytes)
+MAX_JSON = 1024 * 1024
+
+
 async def _json(request: Request) -> dict:
+    size = request.headers.get("content-length")
+    if size is not None and size.isdigit() and int(size) > MAX_JSON:
+        raise Refused(f"the request is larger than the {MAX_JSON // 1024} KB an edit may be", 413)
     try:
         data = await request.json()
     except (json.JSONDecodeError, UnicodeDecodeError):
