@@ -212,6 +212,8 @@ def test_seams_by_clicking_placement_and_save_give_the_shipped_set_up(page, fold
         with page.expect_response(lambda r: "/api/placements/" in r.url) as placed:
             page.click("#pl-apply")
         assert placed.value.ok, placed.value.text()
+        page.wait_for_function("([name, pl]) => JSON.stringify(state.placements[name]) === JSON.stringify(pl)",
+                               arg=[piece["name"], pl])
     page.wait_for_function("document.getElementById('placement-img').dataset.version === String(state.version)",
                            timeout=60_000)
     assert page.evaluate("document.getElementById('placement-img').naturalWidth") > 400

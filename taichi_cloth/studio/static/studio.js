@@ -13,6 +13,8 @@ let selectedSeam = null;   // index
 let selectedPiece = null;  // name
 let drapePoll = null;
 let placementShown = -1;   // the version the placement picture shows
+let formsShown = {};       // what each form was last filled from: a redraw refills a form only when that changed,
+                           // so an answer arriving while the user types does not wipe what is typed
 
 // ------------------------------------------------------------------------------------------------ server calls
 async function api(method, url, body) {
@@ -298,13 +300,22 @@ function drawSeamList() {
 function selectPiece(name) {
   selectedPiece = name;
   $("pl-piece").value = name;
-  fillPlacement();
+  fillPlacement(true);
   drawPattern();
 }
 
-function fillPlacement() {
+function changed(form, from, force) {
+  // whether `form` must be refilled: forced, or what it shows changed on the server
+  const key = JSON.stringify(from);
+  if (!force && formsShown[form] === key) return false;
+  formsShown[form] = key;
+  return true;
+}
+
+function fillPlacement(force) {
   const name = $("pl-piece").value;
   const pl = (state.placements || {})[name] || {};
+  if (!changed("placement", [name, pl], force)) return;
   $("pl-anchor").value = pl.anchor || "";
   $("pl-at-u").value = pl.at ? pl.at[0] : "";
   $("pl-at-v").value = pl.at ? pl.at[1] : "";
@@ -377,9 +388,11 @@ function drawMaterial() {
     for (const name of Object.keys(state.presets)) preset.add(new Option(name, name));
     preset.addEventListener("change", () => fillMaterial(state.presets[preset.value]));
   }
-  preset.value = m.preset;
-  fillMaterial(m.values);
-  $("spacing").value = state.spacing;
+  if (changed("material", m)) {
+    preset.value = m.preset;
+    fillMaterial(m.values);
+  }
+  if (changed("spacing", state.spacing)) $("spacing").value = state.spacing;
   $("particles").textContent = `about ${state.particles.toLocaleString("en")} particles at this spacing ` +
     `(estimate: the pieces' area / spacing² + their outlines / spacing)`;
 }
@@ -484,7 +497,6 @@ function drawDrape(d) {
 
 // ------------------------------------------------------------------------------------------------ the whole page
 function render(s) {
-  const firstTime = !state || state.version !== s.version;
   state = s;
   $("undo-btn").disabled = !s.undo;
   $("redo-btn").disabled = !s.redo;
@@ -500,7 +512,7 @@ function render(s) {
   $("file-info").textContent = `${s.name} · ${s.source || ""} · ${s.units}` +
     (s.saved ? ` · saved as ${s.target}` : (s.autosave.current ? " · unsaved changes (autosaved)" : " · not saved")) +
     (s.autosave.error ? ` · ${s.autosave.error}` : "");
-  if (document.activeElement !== $("save-path") && firstTime) $("save-path").value = s.target || `${s.name}.toml`;
+  if (changed("save", [s.target, s.target ? null : s.name])) $("save-path").value = s.target || `${s.name}.toml`;
   if (document.activeElement !== $("garment-name")) $("garment-name").value = s.name;
   for (const u of document.querySelectorAll(".unit")) u.textContent = s.units;
   if ($("drape-spacing").value === "") $("drape-spacing").value = Math.max(s.spacing, 0.04 / unitScale(s.units));
@@ -563,7 +575,7 @@ function wire() {
     if (!path) { say("choose a file to open", "error"); return; }
     pick = null;
     const r = await api("POST", "/api/open", {path});
-    if (r && r.state) { say(`opened ${path}`, "info"); $("save-path").value = r.state.target || `${r.state.name}.toml`; }
+    if (r && r.state) say(`opened ${path}`, "info");
   });
   $("upload-input").addEventListener("change", async (ev) => {
     const file = ev.target.files[0];
