@@ -8,7 +8,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 OUT ?= out
 
-.PHONY: demo test bench view-check clean
+.PHONY: demo test bench view-check studio-check clean
 
 $(VENV)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -35,6 +35,17 @@ view-check: $(VENV)/.view
 	command -v chromium >/dev/null 2>&1 || { $$(test "$$(id -u)" = 0 || echo sudo) apt-get update -qq && \
 		$$(test "$$(id -u)" = 0 || echo sudo) apt-get install -y -qq chromium; }
 	$(PY) -m taichi_cloth.view_check --out $(OUT)/view --shots docs
+
+# the pattern studio in a real browser (tests/test_studio_browser.py, marked `browser`; not part of make test): opens
+# the T-shirt DXF, sews, places, saves and drapes it by clicking; the screenshots of each step go to docs/studio-*.png
+$(VENV)/.studio: $(VENV)/.installed
+	$(PY) -m pip install --quiet -e '.[studio,view]'
+	touch $@
+
+studio-check: $(VENV)/.studio
+	command -v chromium >/dev/null 2>&1 || { $$(test "$$(id -u)" = 0 || echo sudo) apt-get update -qq && \
+		$$(test "$$(id -u)" = 0 || echo sudo) apt-get install -y -qq chromium; }
+	STUDIO_SHOTS=docs $(PY) -m pytest -m browser -p no:xdist tests/test_studio_browser.py
 
 clean:
 	rm -rf $(VENV) $(OUT) .pytest_cache *.egg-info

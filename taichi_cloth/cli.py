@@ -1,4 +1,4 @@
-"""Command line: `python -m taichi_cloth run|body|flatten|bench|info`."""
+"""Command line: `python -m taichi_cloth run|body|flatten|bench|info|studio`."""
 from __future__ import annotations
 
 import argparse
@@ -27,6 +27,7 @@ from .paths import check_output_folder
 from .garment.garment import RESOLUTIONS
 from .quality import QUALITIES
 from .run import run_scene_file as run_and_record
+from .studio import cli as studio_cli
 
 EXIT_BAD_INPUT = 2
 EXIT_BLOWUP = 3
@@ -219,6 +220,7 @@ def main(argv=None) -> int:
     p_flat.set_defaults(func=_cmd_flatten)
     p_info = sub.add_parser("info", help="versions, integrators and their options, materials")
     p_info.set_defaults(func=_cmd_info)
+    studio_cli.add_parser(sub)
     p_bench = sub.add_parser("bench", help="benchmarks: `bench [integrators]`, `bench " + "`, `bench ".join(list(SUITES)[1:]) + "`")
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv[:1] == ["bench"]:  # a suite imports what it measures: only a bench command loads them

@@ -188,16 +188,19 @@ def frame(points: np.ndarray, views=VIEWS, panel_px: int = PANEL_PX, max_width_p
 
 
 def render_views(cloth_x: np.ndarray, cloth_triangles: np.ndarray, cloth_rgb: np.ndarray, bodies=(), views=VIEWS,
-                 panel_px: int = PANEL_PX, max_width_px: int = MAX_PANEL_WIDTH_PX) -> list[Panel]:
+                 panel_px: int = PANEL_PX, max_width_px: int = MAX_PANEL_WIDTH_PX, frame_on=None) -> list[Panel]:
     """The views of a cloth and bodies, framed on the cloth (frame), z-buffered (rasterize), smooth-shaded.
 
     cloth_x: (P,3) [m]; cloth_triangles: (T,3) int; cloth_rgb: (P,3) float in 0..1, the vertex colours; bodies:
     [(vertices (V,3) [m], triangles (B,3) int)], closed and wound outward (their faces turned away are culled),
-    drawn BODY_RGB. The cloth is two-sided: lit on the side facing the viewer."""
+    drawn BODY_RGB. The cloth is two-sided: lit on the side facing the viewer. frame_on: (N,3) [m] points the views
+    are framed on instead of the cloth (the pattern studio frames pieces being placed on the whole body)."""
     x = np.asarray(cloth_x, np.float64)
     tris = np.asarray(cloth_triangles, np.int64).reshape(-1, 3)
     rgb = np.asarray(cloth_rgb, np.float64)
     pts = x[np.unique(tris)] if len(tris) else x
+    if frame_on is not None:
+        pts = np.asarray(frame_on, np.float64).reshape(-1, 3)
     pts = pts if len(pts) else np.zeros((1, 3))  # no cloth: an empty frame round the origin
     scale, framing = frame(pts, views, panel_px, max_width_px)
     edge = float(np.median(np.linalg.norm(x[tris[:, 1]] - x[tris[:, 0]], axis=1))) if len(tris) else 0.0

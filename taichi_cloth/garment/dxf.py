@@ -47,7 +47,7 @@ from ezdxf.math import rational_bspline_from_ellipse
 from ..errors import PatternError
 from .pattern import UNITS, PatternPiece, Segment, open_uniform_knots, unit_scale
 
-__all__ = ["read_dxf", "write_dxf"]
+__all__ = ["dxf_units", "read_dxf", "write_dxf"]
 
 _INSUNITS_TO_UNITS = {0: "mm", 1: "in", 4: "mm", 5: "cm", 6: "m"}
 _UNITS_TO_INSUNITS = {"in": 1, "mm": 4, "cm": 5, "m": 6}
@@ -113,6 +113,13 @@ def read_dxf(path, units: str | None = None, tolerance: float | None = None) -> 
         raise PatternError(f"{path}: no pattern pieces found (no closed outline on any layer or in any "
                            f"inserted block)")
     return pieces
+
+
+def dxf_units(path) -> str:
+    """The length unit read_dxf reads the DXF file at `path` in when given none ("m", "cm", "mm" or "in": from
+    $INSUNITS, unitless read as mm); PatternError naming the file if it cannot be read or its unit is unsupported."""
+    path = Path(path)
+    return _file_units(_open(path), path, None)[1]
 
 
 def _open(path: Path):

@@ -80,11 +80,19 @@ GARMENT_SCHEMA = Table({
 def load_garment(path, material: Material | None = None) -> GarmentSpec:
     """Parse a garment file into a GarmentSpec (lengths in metres). `material` overrides the file's."""
     path = Path(path)
+    return garment_from_dict(read_toml(path, str(path), "garment", PatternError), path, material)
+
+
+def garment_from_dict(data: dict, path, material: Material | None = None, dxf_reader=None) -> GarmentSpec:
+    """The GarmentSpec of a garment file's parsed content `data` (what tomllib gives), checked as load_garment
+    checks a file: as if it were the file at `path`, which names it in every message and whose folder a relative
+    `dxf` is read from. `dxf_reader(path) -> [PatternPiece]` reads the DXF (default read_dxf; the pattern studio
+    passes one that keeps what it has read, since it checks the set-up after every edit)."""
+    path = Path(path)
     label = str(path)
-    data = read_toml(path, label, "garment", PatternError)
     cfg = Validator(label, PatternError).table(GARMENT_SCHEMA, data, "", "")
     try:
-        return _spec(cfg, path, material)
+        return _spec(cfg, path, material, dxf_reader)
     except PatternError as exc:
         raise PatternError(f"{label}: {exc}") from None
 
@@ -105,17 +113,18 @@ def _placement(pl: dict, s: float, where: str):
                      wrap=pl["wrap"], height=s * pl["height"], angle=pl["angle"])
 
 
-def _spec(cfg: dict, path: Path, material: Material | None) -> GarmentSpec:
+def _spec(cfg: dict, path: Path, material: Material | None, dxf_reader=None) -> GarmentSpec:
     s = unit_scale(cfg["units"])
     if (cfg["spacing"] is None) == (cfg["resolution"] is None):
         raise PatternError("give either spacing (a length) or resolution (draft, fit or fine), not "
                            + ("both" if cfg["spacing"] is not None else "neither"))
     dxf_pieces = None
     if cfg["dxf"] is not None:
-        from .dxf import read_dxf  # ezdxf (0.5 s to import): only a garment drawn in a DXF file
+        if dxf_reader is None:
+            from .dxf import read_dxf as dxf_reader  # ezdxf (0.5 s to import): only a garment drawn in a DXF file
 
         dxf_path = Path(cfg["dxf"])
-        dxf_pieces = {p.name: p for p in read_dxf(dxf_path if dxf_path.is_absolute() else path.parent / dxf_path)}
+        dxf_pieces = {p.name: p for p in dxf_reader(dxf_path if dxf_path.is_absolute() else path.parent / dxf_path)}
     pieces, placements = {}, {}
     for k, p in enumerate(cfg["pieces"]):
         where = f"[[pieces]] #{k + 1} ({p['name']!r})"
