@@ -128,7 +128,8 @@ def _open(path: Path):
     try:
         return ezdxf.readfile(path)
     except Exception as exc:  # ezdxf raises assorted errors (structure, decoding, value) on non-DXF input
-        raise PatternError(f"{path} is not a readable DXF file ({type(exc).__name__}: {exc})") from None
+        why = str(exc) if str(exc).startswith(type(exc).__name__) else f"{type(exc).__name__}: {exc}"
+        raise PatternError(f"{path} is not a readable DXF file ({why})") from None
 
 
 def _file_units(doc, path: Path, units: str | None) -> tuple[float, str]:
