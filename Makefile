@@ -8,7 +8,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 OUT ?= out
 
-.PHONY: demo test bench view-check studio-check clean
+.PHONY: demo test bench view-check studio studio-check clean
 
 $(VENV)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -35,6 +35,16 @@ view-check: $(VENV)/.view
 	command -v chromium >/dev/null 2>&1 || { $$(test "$$(id -u)" = 0 || echo sudo) apt-get update -qq && \
 		$$(test "$$(id -u)" = 0 || echo sudo) apt-get install -y -qq chromium; }
 	$(PY) -m taichi_cloth.view_check --out $(OUT)/view --shots docs
+
+# the pattern studio on the T-shirt's DXF (STUDIO_FILE=another file in demos/garments, or none): installs the
+# `studio` extra first, then serves the page on 127.0.0.1:8765 until Ctrl-C
+STUDIO_FILE ?= tshirt.dxf
+$(VENV)/.studio-app: $(VENV)/.installed
+	$(PY) -m pip install --quiet -e '.[studio]'
+	touch $@
+
+studio: $(VENV)/.studio-app
+	cd demos/garments && ../../$(PY) -m taichi_cloth studio $(STUDIO_FILE)
 
 # the pattern studio in a real browser (tests/test_studio_browser.py, marked `browser`; not part of make test): opens
 # the T-shirt DXF, sews, places, saves and drapes it by clicking; the screenshots of each step go to docs/studio-*.png
