@@ -34,3 +34,22 @@ def check_output_folder(path: str | Path) -> Path:
         where = "is a read-only folder" if q == p else f"lies in the read-only folder {q}"
         raise PermissionError(errno.EACCES, f"{where} (permission denied)", str(p))
     return p
+
+
+#: the reasons of the file-system errors whose system wording misleads here (mkdir's "File exists" for a file in
+#: the way), by errno; the others keep the system's own (e.g. "Permission denied", "No space left on device")
+REASONS = {errno.EEXIST: "is a file, not a folder", errno.ENOTDIR: "a part of the path is a file, not a folder",
+           errno.EISDIR: "is a folder, not a file"}
+
+
+def os_error_text(exc: OSError, where=None) -> str:
+    """`<path>: <reason>` of a file-system error: the path is the exception's (both, for a rename or copy), else
+    `where`; the reason in words (REASONS, or the system's text), e.g. `out/t.rrd: no space left on device`."""
+    path = exc.filename if exc.filename is not None else where
+    if exc.filename2 is not None:
+        path = f"{path} -> {exc.filename2}"
+    reason = exc.strerror or str(exc) or type(exc).__name__
+    if exc.errno in REASONS and reason == os.strerror(exc.errno):
+        reason = REASONS[exc.errno]
+    reason = reason[:1].lower() + reason[1:]
+    return f"{path}: {reason}" if path is not None else reason

@@ -31,7 +31,9 @@ LAZY = ("rerun", "playwright", "warp", "pxr", "ray", "matplotlib", "trimesh", "m
         "taichi_cloth.recorder",        # rerun
         "taichi_cloth.garment.local",   # scipy.spatial, for a garment refined locally
         "taichi_cloth.garment.dxf",     # ezdxf
-        "taichi_cloth.body")            # fit_body: scipy, for a [body] table
+        "taichi_cloth.body",            # fit_body: scipy, for a [body] table
+        "starlette", "uvicorn", "multipart",  # the pattern studio's server: the `studio` extra
+        "taichi_cloth.studio.server")   # starlette
 
 
 def modules() -> dict[str, Path]:

@@ -208,6 +208,10 @@ class GarmentCloth:
     def piece_names(self) -> list[str]:
         return [m.piece.name for m in self.meshes]
 
+    def piece_of_particle(self) -> np.ndarray:
+        """(P,) int64 piece index of each original particle."""
+        return np.repeat(np.arange(len(self.meshes)), np.diff(self.offsets))
+
     def triangle_pieces(self) -> np.ndarray:
         """(T,) int64 piece index of each triangle."""
         return np.repeat(np.arange(len(self.meshes)), [len(m.triangles) for m in self.meshes])

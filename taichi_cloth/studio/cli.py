@@ -9,6 +9,8 @@ import threading
 import webbrowser
 from pathlib import Path
 
+from .folder import Folder, Refused
+
 DEFAULT_PORT = 8765
 EXTRA = "pip install -e '.[studio]'"
 
@@ -35,8 +37,7 @@ def run(args) -> int:
         import uvicorn
     except ImportError as exc:
         return _say(f"error: the pattern studio needs {exc.name}, which is not installed: {EXTRA}")
-    from .folder import Folder, Refused
-    from .server import create_app
+    from .server import create_app  # starlette's: the studio extra
 
     root = Path.cwd()
     start = None

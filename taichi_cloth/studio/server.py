@@ -17,8 +17,9 @@ from starlette.responses import FileResponse, JSONResponse, Response
 from starlette.routing import Mount, Route
 from starlette.staticfiles import StaticFiles
 
-from ..cli import os_error_text
 from ..errors import MeshError, TaichiClothError
+from ..garment.pattern import unit_scale
+from ..paths import os_error_text
 from . import views
 from .drape import DEFAULT_FRAMES, MAX_FRAMES, QUICK_SPACING, DrapeJob, run_command, write_drape
 from .folder import Folder, Refused
@@ -73,7 +74,6 @@ class Studio:
         with self.session.lock:
             if self.session.spec is None:
                 raise Refused("no pattern open: nothing to drape", 409)
-            from ..garment.pattern import unit_scale
 
             scale = unit_scale(self.session.doc.get("units", "m"))
             coarse = None
