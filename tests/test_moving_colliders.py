@@ -30,13 +30,12 @@ def test_a_pose_and_its_inverse():
 
 
 @pytest.mark.parametrize("integrator", ["implicit", "explicit"])
-@pytest.mark.parametrize("u", [(0.4, 0.0, -0.3), (0.0, 0.25, 0.0)], ids=["sliding", "rising"])
-def test_a_sheet_on_a_plane_moving_at_constant_velocity_is_the_sheet_on_a_still_plane_in_its_frame(integrator, u):
-    """Galilean invariance, friction included: a sheet landing on a plane that moves at constant velocity u (along
-    it, or rising), the sheet starting with the plane's velocity, is at every frame the same sheet on the still
-    plane shifted by u t (no air drag: the air would be still in one frame only). float64."""
-    u = np.asarray(u)
-    frames = 30
+def test_a_sheet_on_a_plane_moving_at_constant_velocity_is_the_sheet_on_a_still_plane_in_its_frame(integrator):
+    """Galilean invariance, friction included: a sheet landing on a plane that moves at constant velocity u (rising
+    and sliding along itself), the sheet starting with the plane's velocity, is at every frame the same sheet on the
+    still plane shifted by u t (no air drag: the air would be still in one frame only). float64."""
+    u = np.array([0.4, 0.25, -0.3])
+    frames = 20
 
     def run(moving: bool):
         plane = {"type": "plane", "point": [0, 0, 0], "normal": [0, 1, 0], "friction": 0.5}
