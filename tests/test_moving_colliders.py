@@ -95,3 +95,19 @@ def test_no_particle_is_ever_inside_a_fast_sphere(speed, dt):
         reach = max(reach, x[:, 2].max())
     assert deepest > 0.003 - 1e-4  # the thickness, less float32 round-off
     assert reach > 0.3  # carried forward by the sphere (its front ends at z = 0.65)
+
+
+def test_a_recording_places_a_moving_collider_at_every_frame(tmp_path):
+    """A moving ball is logged once as built and placed by its pose (a transform) at every recorded frame."""
+    from test_recording_and_cli import rows_by_entity
+
+    ball = {"type": "sphere", "center": [0, -0.2, 0], "radius": 0.1, "keyframes": [[0.0, 0, 0, 0], [1.0, 0, 0.5, 0]]}
+    scene = tc.Scene(sheet(), integrator="implicit", dt=1 / 120, colliders=[ball])
+    rec = tc.Recorder(tmp_path / "ball.rrd")
+    scene.run(5, recorder=rec, progress=False)
+    rec.close()
+    got = rows_by_entity(tmp_path / "ball.rrd")
+    static, frames, columns = got["/cloth/colliders"]
+    assert sorted(frames) == [0, 1, 2, 3, 4, 5]  # the start and five frames
+    assert any("Transform3D" in c for c in columns)
+    assert got["/cloth/colliders/spheres"][0] == 1  # the ball itself, once
