@@ -26,15 +26,17 @@ def _closest_on_segment(x, a, b):
 class PrimitiveColliders(ParticleCollider):
     """spheres: list of (center (3,) [m], radius [m]); capsules: list of (a (3,), b (3,), radius); planes: list
     of (point (3,), normal (3,)). thickness [m] is the particle radius r_p; alpha the paper's push fraction
-    (1 = fully out); friction the Coulomb coefficient. Fields hold the shapes so they can move (set_*)."""
+    (1 = fully out); friction the Coulomb coefficient. Fields hold the shapes so they can move (set_*). motion: a
+    scripted rigid motion of them all (clothbase.keyframes.RigidMotion), or None."""
 
     def __init__(self, spheres=(), capsules=(), planes=(), thickness: float = 0.003, alpha: float = 1.0,
-                 friction: float = 0.3):
+                 friction: float = 0.3, motion=None):
         if not (spheres or capsules or planes):
             raise ValueError("PrimitiveColliders needs at least one sphere, capsule or plane")
         if not 0 < alpha <= 1:
             raise ValueError(f"alpha must lie in (0, 1], got {alpha}")
         self.thickness, self.alpha, self.friction = float(thickness), float(alpha), float(friction)
+        self.motion = motion
         self.n_spheres, self.n_capsules, self.n_planes = len(spheres), len(capsules), len(planes)
         blk = FieldBlock()
         self.sphere = blk.vector(4, ti.f32, max(len(spheres), 1))       # cx, cy, cz, r
@@ -122,7 +124,7 @@ class PrimitiveColliders(ParticleCollider):
     def _speculate(self, dt: ti.f64):
         """Speculative contacts: a free particle not in contact but moving fast enough to reach a shape within this
         step of dt [s] has its approach cut to the speed that closes the gap in the step (with Coulomb friction for
-        that impulse), before the integrator's solve, so that the solve moves its neighbours with it. Pushed out
+        that impulse; relative to a moving collider's surface), before the integrator's solve, so that the solve moves its neighbours with it. Pushed out
         only after the step, it stopped on the surface while they fell on by up to a step's travel, and the
         stretch of the springs between them was elastic energy from nowhere (docs/collision.md). No constraint
         goes to the solve: holding the approach there let the constraint pull the particle in against its
@@ -132,8 +134,16 @@ class PrimitiveColliders(ParticleCollider):
             self.speculative[i] = 0
             if self.inv_mass[i] != 0 and not self._touching(i):
                 h = ti.cast(dt, ti.f32)
-                gap, n = self._nearest(ti.cast(self.x[i], ti.f32))
-                v = ti.cast(self.v[i], ti.f32)
+                q = ti.cast(self.x[i], ti.f32)
+                surface = ti.Vector.zero(ti.f32, 3)  # a moving collider: its velocity there, and its frame
+                if ti.static(self.moving):
+                    r = self.to_rest(0, self.x[i])
+                    q = ti.cast(r, ti.f32)
+                    surface = ti.cast(self.surface_velocity(r), ti.f32)
+                gap, n = self._nearest(q)
+                if ti.static(self.moving):
+                    n = ti.cast(self.turn(0, n), ti.f32)
+                v = ti.cast(self.v[i], ti.f32) - surface
                 vn = v.dot(n)
                 if gap > 0 and gap + vn * h < 0:
                     target = -gap / h
@@ -142,7 +152,7 @@ class PrimitiveColliders(ParticleCollider):
                     scale = ti.cast(0.0, ti.f32)
                     if vt_len > 0:
                         scale = ti.max(0.0, 1.0 - ti.cast(self.friction, ti.f32) * (target - vn) / vt_len)
-                    self.v[i] = ti.cast(target * n + scale * vt, self.x.dtype)
+                    self.v[i] = ti.cast(surface + target * n + scale * vt, self.x.dtype)
                     self.speculative[i] = 1
 
     @ti.func
@@ -169,11 +179,16 @@ class PrimitiveColliders(ParticleCollider):
     @ti.func
     def resolve_particle(self, i, start):
         """Particle i, which moved from `start` to x[i] in this step: out of the shapes (entry point first, then the
-        pushes), its velocity answered by `respond`. Touches particle i only, so an integrator may inline it in its
+        pushes), its velocity answered by `respond` (relative to the surface's velocity, for a moving collider,
+        whose tests run in its frame as built on the particle's motion relative to it). Touches particle i only, so an integrator may inline it in its
         own particle loop (the explicit step's fused substeps)."""
         if self.inv_mass[i] != 0:
             p = ti.cast(start, ti.f32)
             q = ti.cast(self.x[i], ti.f32)
+            if ti.static(self.moving):  # the particle's motion relative to the collider, in its frame as built
+                p = ti.cast(self.to_rest(0, start), ti.f32)
+                q = ti.cast(self.to_rest(1, self.x[i]), ti.f32)
+            end = q
             rp = ti.cast(self.thickness, ti.f32)
             band_width = self.band(i) * rp
             for k in range(self.n_spheres):  # tunnelling first: stop at the entry point
@@ -210,24 +225,32 @@ class PrimitiveColliders(ParticleCollider):
                     push += (rp - dist) * nrm
                 if dist < rp + band_width:
                     band += nrm
-            moved = (q + push) - ti.cast(self.x[i], ti.f32)
+            moved = (q + push) - end
             friction = ti.cast(self.friction, self.x.dtype)
+            surface = ti.Vector.zero(self.x.dtype, 3)  # the collider's velocity where the particle ends
+            if ti.static(self.moving):
+                surface = ti.cast(self.surface_velocity(q + push), self.x.dtype)
             if push.norm() > 0 or moved.norm() > 0:
                 self.x[i] = ti.cast(q + push, self.x.dtype)
                 nrm = ti.cast(push.normalized(1e-20), self.x.dtype)
+                if ti.static(self.moving):
+                    self.x[i] = ti.cast(self.to_world(1, q + push), self.x.dtype)
+                    nrm = ti.cast(self.turn(1, nrm), self.x.dtype)
                 if push.norm() > 0:
-                    self.record_contact(i, nrm, friction)
-                self.respond(i, nrm, ti.Vector.zero(self.x.dtype, 3), friction)
+                    self.record_contact(i, nrm, friction, surface)
+                self.respond(i, nrm, surface, friction)
             elif band.norm() > 0:  # resting just above a surface: a contact for the solve, nothing to undo
                 nrm = ti.cast(band.normalized(1e-20), self.x.dtype)
-                self.record_contact(i, nrm, friction)
+                if ti.static(self.moving):
+                    nrm = ti.cast(self.turn(1, nrm), self.x.dtype)
+                self.record_contact(i, nrm, friction, surface)
                 if self.speculative[i] != 0:  # arrived at the surface: the rest of its approach ends here
-                    self.respond(i, nrm, ti.Vector.zero(self.x.dtype, 3), friction)
+                    self.respond(i, nrm, surface, friction)
             self.speculative[i] = 0
 
     def signed_distance(self, points) -> np.ndarray:
-        """Signed distance [m] of points (N,3) to the union of the shapes, negative inside."""
-        x = np.asarray(points, dtype=np.float64)
+        """Signed distance [m] of points (N,3) to the union of the shapes (where they are now), negative inside."""
+        x = np.asarray(self.rest_points(points), dtype=np.float64)
         d = np.full(len(x), np.inf)
         for c, r in self.spheres_np:
             d = np.minimum(d, np.linalg.norm(x - c, axis=1) - r)

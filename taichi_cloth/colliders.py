@@ -9,10 +9,13 @@ Spec keys (SI units):
                       "cell_size": None (1.5 x mean edge), "mode": "fuzzy" | "exact",
                       "repulsion": None | {"stiffness": N, "distance": m, "max_force": N}}
   {"type": "standin"}: Zhang et al. 2017's sphere-collider body, a sphere-and-capsule stand-in for the mannequin
-  every type also takes "thickness" [m] (default 0.003) and "friction" (default 0.3).
+  every type also takes "thickness" [m] (default 0.003) and "friction" (default 0.3), and may move: "keyframes":
+  [[t, dx, dy, dz], ...] (translation [s, m]) and "rotation": [[t, ax, ay, az], ...] (degrees about the x, y, z axes
+  through "pivot" [m]), linear between keys and held outside them (clothbase.keyframes). A moving collider is
+  posed before every step, and its contact tests run in its own frame on each particle's relative motion.
 A dict is checked as a scene file's [[colliders]] table is (taichi_cloth.specs): a misspelled or unknown key, a
 missing one, a value of the wrong kind are refused with one SceneError line naming "[[colliders]] #k" and the key.
-Analytic shapes with the same thickness and friction share one PrimitiveColliders (one kernel).
+Still analytic shapes with the same thickness and friction share one PrimitiveColliders (one kernel).
 `Colliders` is the scene's collision stage (and a controller for what it shows, counts and refills): `begin`
 remembers where the particles start a step; `collide`, after the step and the controllers' after_step, pushes them
 out and writes the contact normals the next step's integrator filters (Scene.substep).
@@ -24,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from clothbase.keyframes import RigidMotion
 from clothbase.meshes import load_triangle_mesh, open_mesh_warning
 from collision import MeshCollider, PrimitiveColliders
 from collision.mannequin import load_mannequin
@@ -32,6 +36,7 @@ from collision.self_collision import SelfCollision
 
 from .contacts import require_bound
 from .control import Controller
+from .errors import SceneError
 from .guards import check_voxel_grid
 from .specs import collider_table
 
@@ -64,6 +69,9 @@ def build_colliders(specs, base_dir: Path | None = None) -> list:
         spec = collider_table(spec, where)
         kind = spec["type"]
         thickness, friction = spec["thickness"], spec["friction"]
+        motion = None
+        if spec.get("keyframes") is not None or spec.get("rotation") is not None:
+            motion = RigidMotion(spec.get("keyframes"), spec.get("rotation"), spec.get("pivot", (0.0, 0.0, 0.0)))
         if kind == "mesh":
             if "vertices" in spec:  # a body given as arrays (e.g. a fitted taichi_cloth.body morph)
                 v, t = spec["vertices"], spec["triangles"]
@@ -75,11 +83,15 @@ def build_colliders(specs, base_dir: Path | None = None) -> list:
             if cell is not None:  # the default (1.5 x the mean edge) bins each triangle into a few cells
                 check_voxel_grid(v, t, cell, thickness, thickness + MAX_STEP, f"{where} cell_size {cell:g} m "
                                  f"(mesh {spec['path']})")
+            if motion is not None and spec.get("repulsion"):
+                raise SceneError(f"{where}: a moving body has no repulsion force (give it keyframes or repulsion)")
             out.append(MeshCollider(v, t, thickness=thickness, friction=friction, cell_size=cell,
                                     mode=spec.get("mode", "fuzzy"), repulsion=spec.get("repulsion"),
-                                    source=str(spec["path"])))
+                                    source=str(spec["path"]), motion=motion))
         elif kind in ("sphere", "capsule", "plane", "standin"):
-            g = groups.setdefault((thickness, friction), {"sphere": [], "capsule": [], "plane": []})
+            # still shapes of equal thickness and friction share one object; a moving one has its own (its motion)
+            key = (thickness, friction) if motion is None else (thickness, friction, k)
+            g = groups.setdefault(key, {"sphere": [], "capsule": [], "plane": [], "motion": motion})
             if kind == "standin":
                 g["sphere"] += STANDIN_SPHERES
                 g["capsule"] += STANDIN_CAPSULES
@@ -91,8 +103,9 @@ def build_colliders(specs, base_dir: Path | None = None) -> list:
                 g["plane"].append((spec["point"], spec["normal"]))
         else:
             raise ValueError(f"unknown collider type {kind!r} (sphere, capsule, plane, mesh, standin)")
-    for (thickness, friction), g in groups.items():
-        out.append(PrimitiveColliders(g["sphere"], g["capsule"], g["plane"], thickness=thickness, friction=friction))
+    for (thickness, friction, *_), g in groups.items():
+        out.append(PrimitiveColliders(g["sphere"], g["capsule"], g["plane"], thickness=thickness, friction=friction,
+                                      motion=g["motion"]))
     return out
 
 
@@ -112,7 +125,7 @@ class Colliders(Controller):
         self.moving: set[int] = set()
         for c in self.objects:
             c.attach(state.x, state.v, model.inv_mass, model.n_particles, contacts.normal, model.serial,
-                     contacts.friction, contacts.before)
+                     contacts.friction, contacts.before, contacts.velocity)
 
     @property
     def thickness(self) -> float | None:
@@ -162,8 +175,20 @@ class Colliders(Controller):
 
     def inline_step(self) -> tuple | None:
         """The primitive colliders (spheres, capsules, planes), whose resolve touches one particle at a time; None
-        when a body mesh or self-collision is among the colliders."""
+        when a body mesh or self-collision is among the colliders, or one moves (its pose changes every step)."""
+        if any(c.moving for c in self.objects):
+            return None
         return tuple(self.objects) if all(isinstance(c, PrimitiveColliders) for c in self.objects) else None
+
+    @property
+    def per_step(self) -> bool:
+        """A scripted motion poses its collider before every step."""
+        return any(c.moving for c in self.objects)
+
+    def before_step(self, t: float, dt: float) -> None:
+        """The poses of the moving colliders at the start and the end of the step from t over dt [s]."""
+        for c in self.objects:
+            c.move(t, t + dt)
 
     def begin(self, state, contacts, dt: float | None = None) -> None:
         """A step of `state` begins: every collider remembers where the particles start (its crossing tests run
@@ -195,3 +220,9 @@ class Colliders(Controller):
     def layout(self, layout) -> None:
         for k, c in enumerate(self.objects):
             layout.colliders.append(dict(c.describe(), moving=k in self.moving))
+
+    def record(self, frame) -> None:
+        """The pose of each collider on a scripted path, now."""
+        for k, c in enumerate(self.objects):
+            if c.moving:
+                frame.poses[k] = c.pose_now()

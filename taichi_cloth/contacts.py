@@ -19,7 +19,8 @@ from clothbase.fields import FieldBlock
 @ti.data_oriented
 class Contacts:
     """normal: (P,) vec3 fp, the unit contact normal of each particle touched in the last step (0 if none);
-    friction: (P,) fp, the Coulomb coefficient of that contact; stuck: (P,) i32, 1 where the integrator holds the
+    friction: (P,) fp, the Coulomb coefficient of that contact; velocity: (P,) vec3 fp, the surface's velocity [m/s]
+    there (0 on a still collider: the contact's friction and resting act on the velocity relative to it); stuck: (P,) i32, 1 where the integrator holds the
     particle by static friction this step (every direction filtered); released: (P,) i32, 1 where the integrator
     lets a touching particle leave the body this step (the force pulls it away: no direction filtered). The normal
     of a released particle stays as the colliders wrote it: the stretch limit still sees it on the body. before:
@@ -29,6 +30,7 @@ class Contacts:
         self.model = model
         blk = FieldBlock()
         self.normal = blk.vector(3, model.fp, model.capacity[0])
+        self.velocity = blk.vector(3, model.fp, model.capacity[0])
         self.friction = blk.scalar(model.fp, model.capacity[0])
         self.stuck = blk.scalar(ti.i32, model.capacity[0])
         self.released = blk.scalar(ti.i32, model.capacity[0])
@@ -52,6 +54,7 @@ class Contacts:
             n = self.normal[i]
             self.before[i] = ti.cast(n.dot(n) > 0 and held == 0, ti.i32)
             self.normal[i] = ti.Vector.zero(self.model.fp, 3)
+            self.velocity[i] = ti.Vector.zero(self.model.fp, 3)
             self.released[i] = 0
             if held != 0:
                 self.stuck[i] = 0

@@ -55,6 +55,8 @@ class FrameSnapshot:
     segments:         name -> (S,2,3) float32 line segments [m] that move (e.g. a seam's open pairs while sewing);
                       a name logged before and missing now is cleared
     meshes:           collider index -> (V,3) float32 new vertex positions [m] of a body that moved
+    poses:            collider index -> (R (3,3), translation (3,)) of a collider on a scripted path: it lies at
+                      R r + translation [m] for each point r of it as built
     scalars:          series path -> a value or a list of values (e.g. "energy" -> [kinetic, potential, total] [J])
     events:           (level, text) pairs: what happened since the last snapshot ("INFO", "WARN", "ERROR")
     """
@@ -71,6 +73,7 @@ class FrameSnapshot:
     pieces: dict = field(default_factory=dict)
     segments: dict = field(default_factory=dict)
     meshes: dict = field(default_factory=dict)
+    poses: dict = field(default_factory=dict)
     scalars: dict = field(default_factory=dict)
     events: list = field(default_factory=list)
 

@@ -15,24 +15,10 @@ import numpy as np
 import taichi as ti
 
 from clothbase.fields import FieldBlock
+from clothbase.keyframes import KeyframePath
 
 from .control import Controller
 from .specs import pin_table
-
-
-class KeyframePath:
-    """Piecewise-linear offset [m] through keyframes (t [s], dx, dy, dz); held constant outside them."""
-
-    def __init__(self, keyframes):
-        k = np.asarray(keyframes, dtype=np.float64)
-        if k.ndim != 2 or k.shape[1] != 4 or len(k) == 0:
-            raise ValueError("keyframes must be a list of [t, dx, dy, dz] rows")
-        if np.any(np.diff(k[:, 0]) <= 0):
-            raise ValueError("keyframe times must increase strictly")
-        self.t, self.offsets = k[:, 0], k[:, 1:]
-
-    def __call__(self, t: float) -> np.ndarray:
-        return np.array([np.interp(t, self.t, self.offsets[:, c]) for c in range(3)])
 
 
 @dataclass

@@ -268,6 +268,8 @@ class Recorder:
         self._log_segments(entity, frame.segments)
         for k, vertices in frame.meshes.items():
             rec.log(self._colliders[entity][k], rr.Mesh3D.from_fields(vertex_positions=vertices))
+        for k, (rotation, translation) in frame.poses.items():  # drawn as built, placed by its pose
+            rec.log(self._colliders[entity][k], rr.Transform3D(translation=translation, mat3x3=rotation))
         for path, value in frame.scalars.items():
             frames, times, values = batch.scalars.setdefault(path, ([], [], []))
             frames.append(frame.frame)

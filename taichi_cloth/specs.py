@@ -5,7 +5,10 @@ keys with the same line: `[[colliders]] #2: unknown key 'radus' (did you mean 'r
 A collider (SI units; taichi_cloth.colliders builds it):
     type = "sphere" (center, radius) | "capsule" (a, b, radius) | "plane" (point, normal) | "mesh" (path: a file or
     "mannequin", scale, translate, cell_size, mode = "fuzzy" | "exact", repulsion = {stiffness, distance,
-    max_force}) | "standin"; every type: thickness [m] = 0.003 (> 0 for a mesh, >= 0 for the others), friction = 0.3
+    max_force}) | "standin"; every type: thickness [m] = 0.003 (> 0 for a mesh, >= 0 for the others), friction = 0.3,
+    and a scripted rigid motion: keyframes = [[t, dx, dy, dz], ...] (translation [s, m]), rotation = [[t, ax, ay,
+    az], ...] (degrees about the x, y, z axes through pivot [m], default the origin), linear between keys and held
+    outside them (clothbase.keyframes)
 A pin group (taichi_cloth.pins.PinSpec):
     indices = [i, ...], near = [[x, y, z], ...], box = {min = [x, y, z], max = [x, y, z]}: what it selects (at least
     one); keyframes = [[t, dx, dy, dz], ...]: its motion (rows in strictly increasing t)
@@ -24,6 +27,8 @@ import numpy as np
 from .schema import Field, Table, Validator, nonneg, nonzero, positive
 
 COLLIDER_TYPES = ("sphere", "capsule", "plane", "mesh", "standin")
+#: the keys of a collider's scripted rigid motion, every type (clothbase.keyframes.RigidMotion)
+MOTION_KEYS = ("keyframes", "rotation", "pivot")
 #: keys each collider type needs, and the optional ones it accepts (thickness and friction: every type)
 COLLIDER_KEYS = {"sphere": ({"center", "radius"}, set()), "capsule": ({"a", "b", "radius"}, set()),
                  "plane": ({"point", "normal"}, set()), "standin": (set(), set()),
@@ -35,12 +40,18 @@ DEFAULT_FRICTION = 0.3
 def _check_collider(v: Validator, col: dict, where: str) -> None:
     """The keys of the collider's type: those it needs, none it does not take; then the absent ones are dropped."""
     required, optional = COLLIDER_KEYS[col["type"]]
-    given = {k for k, val in col.items() if val is not None} - {"type", "thickness", "friction"}
+    given = {k for k, val in col.items() if val is not None} - {"type", "thickness", "friction"} - set(MOTION_KEYS)
     for key in sorted(required - given):
         v.fail(where, f"a {col['type']} collider needs {key!r}")
     for key in sorted(given - required - optional):
         v.fail(where, f"{key!r} is not a {col['type']} collider key (it takes {', '.join(sorted(required | optional))},"
-                      " thickness, friction)")
+                      " thickness, friction, keyframes, rotation, pivot)")
+    for key in ("keyframes", "rotation"):
+        rows = col.get(key)
+        if isinstance(rows, list) and any(b[0] <= a[0] for a, b in zip(rows, rows[1:])):
+            v.fail(f"{where} {key}", "times must increase strictly")
+    if col.get("pivot") is not None and col.get("rotation") is None:
+        v.fail(f"{where} pivot", "is the centre of a rotation: give rotation too")
     if col["type"] == "mesh" and not col["thickness"] > 0:  # a sphere, capsule or plane may have none
         v.fail(f"{where} thickness", f"must be > 0 for a mesh collider, got {col['thickness']!r}")
     for key in [k for k, val in list(col.items()) if val is None]:
@@ -56,7 +67,8 @@ COLLIDER_TABLE = Table({
     "cell_size": Field("number", None, positive), "mode": Field("str", None, choices=("fuzzy", "exact")),
     "repulsion": Table({"stiffness": Field("number", 1e-3, nonneg), "distance": Field("number", 0.01, positive),
                         "max_force": Field("number", 0.05, positive)}),
-    "thickness": Field("number", DEFAULT_THICKNESS, nonneg), "friction": Field("number", DEFAULT_FRICTION, nonneg)},
+    "thickness": Field("number", DEFAULT_THICKNESS, nonneg), "friction": Field("number", DEFAULT_FRICTION, nonneg),
+    "keyframes": Field("keyframes", None), "rotation": Field("keyframes", None), "pivot": Field("vec3", None)},
     check=_check_collider)
 
 

@@ -94,23 +94,19 @@ def test_the_counter_names_every_kind_of_read():
     assert writes.total == 1  # the to_numpy; writes wait for nothing
 
 
-@pytest.mark.parametrize("integrator", ["implicit", "explicit"])
-def test_self_collision_reads_nothing_inside_the_steps_while_impact_zones_hold_the_cloth(integrator):
-    """The jerked sheet (benchmarks/self_collision_stress.py, 16 x 16) folds over itself: in the counted frames the
-    passes push its layers apart and (implicit) the continuous stage stops closing pairs and merges them into impact
-    zones in the steps that need it, all on the device; the grid's capacity check travels with the measurement."""
+def test_self_collision_reads_nothing_inside_the_steps():
+    """The jerked sheet (benchmarks/self_collision_stress.py, 16 x 16) on the explicit step folds over itself: in the
+    counted frames the passes push its layers apart, on the device; the grid's capacity check travels with the
+    measurement. (The implicit step on the same sheet, whose continuous stage merges impact zones in most frames,
+    reads nothing inside its steps either: tests/test_self_collision_stress.py.)"""
     from benchmarks.self_collision_stress import jerked_sheet
 
-    scene, _ = jerked_sheet(True, small=True, integrator=integrator, step="fixed")
+    scene, _ = jerked_sheet(True, small=True, integrator="explicit", step="fixed")
     obj = scene.controller("colliders").self_collision
     scene.run(6, progress=False, until_rest=False)
     before = obj.counter_values()
     summary = scene.run(FRAMES + 1, progress=False, until_rest=False)
     assert_one_read_per_frame(summary)
     after = obj.counter_values()
-    if integrator == "implicit":  # at 1/240 s the fold closes pairs every frame
-        assert after["closing pairs"] > before["closing pairs"]
-        assert after["impact zones"] > before["impact zones"]
-    else:  # its short steps keep the layers apart by the proximity passes alone
-        assert after["point-triangle contacts"] > before["point-triangle contacts"]
-        assert after["edge-edge contacts"] > before["edge-edge contacts"]
+    assert after["point-triangle contacts"] > before["point-triangle contacts"]
+    assert after["edge-edge contacts"] > before["edge-edge contacts"]

@@ -230,13 +230,15 @@ class Implicit(Integrator):
             dv = mu f_n h / m of its tangential velocity in this step: where that stops it and the tangential force
             is within the friction cone (|f_t| <= mu f_n), it sticks (held where it is: every direction filtered,
             v = 0); otherwise it slides (its normal direction filtered), its tangential velocity reduced by dv.
+        Velocities are relative to the contact's surface (Contacts.velocity: a moving collider's).
         The velocities change in a second pass, after every force was read at the old ones."""
         m, s, c = self.model, self.state, self.contacts
         h = ti.cast(dt, m.fp)
         ti.loop_config(serialize=self.model.serial)
         for i in range(m.n_particles[None]):
             n = c.normal[i]
-            v = s.v[i]
+            w = c.velocity[i]  # the surface's: friction and resting act on the velocity relative to it
+            v = s.v[i] - w
             stuck = 0
             released = 0
             if m.inv_mass[i] != 0 and n.dot(n) > 0:
@@ -263,7 +265,7 @@ class Implicit(Integrator):
                     # the filter would otherwise keep against the force that presses (the T-shirt at rest gained
                     # 3e-5 J a step that way), and which freed would fall back and be pushed out every step
                     v = vt
-            self.pcg.q[i] = v  # scratch: the new velocity
+            self.pcg.q[i] = w + v  # scratch: the new velocity
             c.stuck[i] = stuck
             c.released[i] = released
         ti.loop_config(serialize=self.model.serial)
