@@ -122,12 +122,12 @@ class PrimitiveColliders(ParticleCollider):
 
     @ti.kernel
     def _speculate(self, dt: ti.f64):
-        """Speculative contacts: a free particle not in contact but moving fast enough to reach a shape within this
-        step of dt [s] has its approach cut to the speed that closes the gap in the step (with Coulomb friction for
-        that impulse; relative to a moving collider's surface), before the integrator's solve, so that the solve moves its neighbours with it. Pushed out
-        only after the step, it stopped on the surface while they fell on by up to a step's travel, and the
-        stretch of the springs between them was elastic energy from nowhere (docs/collision.md). No constraint
-        goes to the solve: holding the approach there let the constraint pull the particle in against its
+        """Speculative contacts: a free particle not in contact but moving fast enough to reach a shape within this step
+        of dt [s] has its approach cut to the speed that closes the gap in the step (with Coulomb friction for that
+        impulse; relative to a moving collider's surface), before the integrator's solve, so that the solve moves its
+        neighbours with it. Pushed out only after the step, it stopped on the surface while they fell on by up to a
+        step's travel, and the stretch of the springs between them was elastic energy from nowhere (docs/collision.md).
+        No constraint goes to the solve: holding the approach there let the constraint pull the particle in against its
         neighbours, and a step gained energy."""
         ti.loop_config(serialize=self.serial)
         for i in range(self.n_particles[None]):
@@ -179,9 +179,9 @@ class PrimitiveColliders(ParticleCollider):
     @ti.func
     def resolve_particle(self, i, start):
         """Particle i, which moved from `start` to x[i] in this step: out of the shapes (entry point first, then the
-        pushes), its velocity answered by `respond` (relative to the surface's velocity, for a moving collider,
-        whose tests run in its frame as built on the particle's motion relative to it). Touches particle i only, so an integrator may inline it in its
-        own particle loop (the explicit step's fused substeps)."""
+        pushes), its velocity answered by `respond` (relative to the surface's velocity, for a moving collider, whose
+        tests run in its frame as built on the particle's motion relative to it). Touches particle i only, so an
+        integrator may inline it in its own particle loop (the explicit step's fused substeps)."""
         if self.inv_mass[i] != 0:
             p = ti.cast(start, ti.f32)
             q = ti.cast(self.x[i], ti.f32)

@@ -18,13 +18,13 @@ from clothbase.fields import FieldBlock
 
 @ti.data_oriented
 class Contacts:
-    """normal: (P,) vec3 fp, the unit contact normal of each particle touched in the last step (0 if none);
-    friction: (P,) fp, the Coulomb coefficient of that contact; velocity: (P,) vec3 fp, the surface's velocity [m/s]
-    there (0 on a still collider: the contact's friction and resting act on the velocity relative to it); stuck: (P,) i32, 1 where the integrator holds the
-    particle by static friction this step (every direction filtered); released: (P,) i32, 1 where the integrator
-    lets a touching particle leave the body this step (the force pulls it away: no direction filtered). The normal
-    of a released particle stays as the colliders wrote it: the stretch limit still sees it on the body. before:
-    (P,) i32, 1 where the particle had a contact after the step before (the colliders give it a wider band)."""
+    """normal: (P,) vec3 fp, the unit contact normal of each particle touched in the last step (0 if none); friction:
+    (P,) fp, the Coulomb coefficient of that contact; velocity: (P,) vec3 fp, the surface's velocity [m/s] there (0 on a
+    still collider: the contact's friction and resting act on the velocity relative to it); stuck: (P,) i32, 1 where the
+    integrator holds the particle by static friction this step (every direction filtered); released: (P,) i32, 1 where
+    the integrator lets a touching particle leave the body this step (the force pulls it away: no direction filtered).
+    The normal of a released particle stays as the colliders wrote it: the stretch limit still sees it on the body.
+    before: (P,) i32, 1 where the particle had a contact after the step before (the colliders give it a wider band)."""
 
     def __init__(self, model):
         self.model = model
