@@ -22,7 +22,6 @@ import os
 import re
 import threading
 import time
-import tomllib
 from pathlib import Path
 
 from ..errors import PatternError
@@ -34,6 +33,7 @@ from ..garment.seams import DEFAULT_LENGTH_TOLERANCE, plan_counts
 from ..guards import check_memory, sheet_particles
 from ..material import MATERIALS
 from ..paths import free_path
+from ..schema import read_toml
 from .folder import Folder, Refused
 from .layout import layout, segment_lengths
 from .tomlfile import garment_text
@@ -136,13 +136,7 @@ class Session:
 
     def doc_from_toml(self, path: Path) -> dict:
         """The set-up of a garment file, its `dxf` made relative to the folder (refused if it leads outside)."""
-        try:
-            doc = tomllib.loads(path.read_text(encoding="utf-8"))
-        except tomllib.TOMLDecodeError as exc:
-            raise PatternError(f"{self.folder.relative(path)}: not valid TOML: {exc}") from None
-        except UnicodeDecodeError:
-            raise PatternError(f"{self.folder.relative(path)}: not a UTF-8 text file") from None
-        doc.setdefault("name", path.stem)
+        doc = read_toml(path, str(self.folder.relative(path)), "garment", PatternError)
         if isinstance(doc.get("dxf"), str):
             full = Path(doc["dxf"]) if Path(doc["dxf"]).is_absolute() else path.parent / doc["dxf"]
             real = full.resolve()
