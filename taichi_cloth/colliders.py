@@ -190,6 +190,11 @@ class Colliders(Controller):
         for c in self.objects:
             c.move(t, t + dt)
 
+    def reset(self) -> None:
+        """Back to t = 0: the moving colliders where they start."""
+        for c in self.objects:
+            c.move(0.0, 0.0)
+
     def begin(self, state, contacts, dt: float | None = None) -> None:
         """A step of `state` begins: every collider remembers where the particles start (its crossing tests run
         from there); with the step dt [s], the primitive colliders also cut the approach of the particles that would

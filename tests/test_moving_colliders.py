@@ -94,6 +94,8 @@ def test_no_particle_is_ever_inside_a_fast_sphere(speed, dt):
         reach = max(reach, x[:, 2].max())
     assert deepest > 0.003 - 1e-4  # the thickness, less float32 round-off
     assert reach > 0.3  # carried forward by the sphere (its front ends at z = 0.65)
+    sc.reset()  # back where it started
+    assert ball.signed_distance([[0.0, 1.0, -0.5]])[0] == pytest.approx(-0.15)
 
 
 def test_a_recording_places_a_moving_collider_at_every_frame(tmp_path):
