@@ -33,6 +33,22 @@ def mesh_fields(v, t):
     return verts, tris, count
 
 
+def one_step(col, starts, ends) -> np.ndarray:
+    """Attach collider `col` to free float64 particles (unit inverse mass) that move from `starts` to `ends` (N,3)
+    [m] in one step of 0.01 s, resolve it, and return where they end (N,3)."""
+    n = len(starts)
+    x, v = ti.Vector.field(3, ti.f64, n), ti.Vector.field(3, ti.f64, n)
+    w, cnt = ti.field(ti.f64, n), ti.field(ti.i32, ())
+    w.fill(1.0)
+    cnt[None] = n
+    col.attach(x, v, w, cnt)
+    x.from_numpy(starts)
+    col.begin_step()
+    x.from_numpy(ends)
+    col.resolve(0.01)
+    return x.to_numpy()
+
+
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_grid_bins_exactly_what_brute_force_finds(seed):
     """Every cell holds exactly the triangles whose padded bounding box overlaps the cell."""
@@ -121,18 +137,7 @@ def test_exact_mode_takes_the_earliest_of_all_crossings():
     starts = 0.35 * starts / np.linalg.norm(starts, axis=1)[:, None]
     ends = -starts + rng.normal(0, 0.05, starts.shape)  # straight through the ball
     n = len(starts)
-    x = ti.Vector.field(3, ti.f64, n)
-    v = ti.Vector.field(3, ti.f64, n)
-    w = ti.field(ti.f64, n)
-    cnt = ti.field(ti.i32, ())
-    w.fill(1.0)
-    cnt[None] = n
-    col.attach(x, v, w, cnt)
-    x.from_numpy(starts)
-    col.begin_step()
-    x.from_numpy(ends)
-    col.resolve(0.01)
-    got = x.to_numpy()
+    got = one_step(col, starts, ends)
     # brute force: Moller-Trumbore of each segment against every triangle (numpy), earliest crossing
     a, b, c = (body.vertices[body.faces[:, k]] for k in range(3))
     e1, e2 = b - a, c - a
@@ -254,19 +259,11 @@ def test_the_fuzzy_ranking_cuts_the_tests_of_particles_that_cross():
         # 512 candidates: no list overflows (an overflowing particle is scanned unranked in both modes)
         col = MeshCollider(ball.vertices, ball.faces, thickness=1e-4, friction=0.0, mode=mode, passes=1,
                            max_candidates=512, source="ball")
-        x, v, w, cnt = ti.Vector.field(3, ti.f64, n), ti.Vector.field(3, ti.f64, n), ti.field(ti.f64, n), \
-            ti.field(ti.i32, ())
-        w.fill(1.0)
-        cnt[None] = n
-        col.attach(x, v, w, cnt)
-        x.from_numpy(starts)
-        col.begin_step()
-        x.from_numpy(ends)
-        col.resolve(0.01)
+        got = one_step(col, starts, ends)
         counts[mode] = col.counter_values()
         print(mode, counts[mode])  # the figures in docs/collision.md (pytest -s)
         # wherever the chosen face, the particle ends outside the ball
-        assert np.linalg.norm(x.to_numpy(), axis=1).min() > 0.2 * np.cos(np.radians(20))
+        assert np.linalg.norm(got, axis=1).min() > 0.2 * np.cos(np.radians(20))
     exact, fuzzy = counts["exact"], counts["fuzzy"]
     assert exact["candidate_overflows"] == fuzzy["candidate_overflows"] == 0
     assert exact["queries"] == fuzzy["queries"] == n
