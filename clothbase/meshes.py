@@ -115,6 +115,17 @@ def open_mesh_warning(triangles, source: str = "mesh") -> None:
              "has no inside")
 
 
+def vertex_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """(V,3) float64 unit area-weighted vertex normals of a mesh (vertices (V,3) [m], triangles (T,3) int): the sum
+    of the area vectors of each vertex's triangles, normalised (zero where a vertex has none or they cancel)."""
+    v, t = np.asarray(vertices, np.float64), np.asarray(triangles, np.int64)
+    area = np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])  # twice the area vector
+    n = np.stack([np.bincount(t.ravel(), np.repeat(area[:, c], 3), minlength=len(v)) for c in range(3)],
+                 axis=1).astype(np.float64)  # (bincount of no weights is an integer array)
+    length = np.linalg.norm(n, axis=1, keepdims=True)
+    return np.divide(n, length, out=np.zeros_like(n), where=length > 1e-30)
+
+
 def validate_triangle_mesh(vertices, triangles, source: str = "mesh") -> None:
     """Raise MeshError naming `source` and the first defect found (see mesh_problems)."""
     v, t = np.asarray(vertices), np.asarray(triangles)

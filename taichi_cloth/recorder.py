@@ -30,6 +30,8 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
+from clothbase.meshes import vertex_normals
+
 from .paths import free_path
 from .still import FRAME_MARGIN
 from .strain import strain_colormap, strain_colors
@@ -133,18 +135,6 @@ def _collider_names(colliders: list) -> list[str]:
     return names
 
 
-def _vertex_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
-    """(V,3) float32 area-weighted unit vertex normals of a (V,3) [m], (T,3) mesh: without them the viewer draws a
-    mesh unlit, a flat silhouette."""
-    v = np.asarray(vertices, np.float64)
-    a, b, c = (v[triangles[:, k]] for k in range(3))
-    face = np.cross(b - a, c - a)
-    n = np.zeros_like(v)
-    for k in range(3):
-        np.add.at(n, triangles[:, k], face)
-    return (n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-20)).astype(np.float32)
-
-
 def _quaternion_z_to(direction) -> list:
     """xyzw quaternion rotating +z onto `direction` (Rerun capsules extend along +z)."""
     d = np.asarray(direction, dtype=np.float64)
@@ -212,8 +202,9 @@ class Recorder:
             return
         if description["kind"] == "mesh":
             v, tri = np.asarray(description["vertices"], np.float32), np.asarray(description["triangles"], np.int64)
+            normals = vertex_normals(v, tri).astype(np.float32)  # without them the viewer draws a flat silhouette
             rec.log(entity, rr.Mesh3D(vertex_positions=v, triangle_indices=tri.astype(np.uint32),
-                                      vertex_normals=_vertex_normals(v, tri), albedo_factor=BODY_COLOR), static=static)
+                                      vertex_normals=normals, albedo_factor=BODY_COLOR), static=static)
             return
         if description["spheres"]:
             rec.log(f"{entity}/spheres", rr.Ellipsoids3D(

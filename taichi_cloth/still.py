@@ -16,6 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
+from clothbase.meshes import vertex_normals
+
 from .pattern_view import garment_spec, pattern_view, plot_pattern
 from .strain import strain_colormap, vertex_strain
 
@@ -77,17 +79,6 @@ def body_meshes(scene) -> list:
             ball = trimesh.creation.icosphere(subdivisions=3, radius=radius)
             out.append((np.asarray(ball.vertices) + center, np.asarray(ball.faces, np.int64)))
     return out
-
-
-def vertex_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
-    """(V,3) float64 unit area-weighted vertex normals of a mesh (vertices (V,3) [m], triangles (T,3) int): the sum
-    of the area vectors of each vertex's triangles, normalised (zero where a vertex has none or they cancel)."""
-    v, t = np.asarray(vertices, np.float64), np.asarray(triangles, np.int64)
-    area = np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])  # twice the area vector
-    n = np.stack([np.bincount(t.ravel(), np.repeat(area[:, c], 3), minlength=len(v)) for c in range(3)],
-                 axis=1).astype(np.float64)  # (bincount of no weights is an integer array)
-    length = np.linalg.norm(n, axis=1, keepdims=True)
-    return np.divide(n, length, out=np.zeros_like(n), where=length > 1e-30)
 
 
 def rasterize(screen: np.ndarray, depth: np.ndarray, shape: tuple[int, int]):
