@@ -57,7 +57,17 @@ class ParticleCollider:
 
     @property
     def moving(self) -> bool:
+        """On a scripted rigid motion (its tests run in its frame as built)."""
         return self.motion is not None
+
+    @property
+    def animated(self) -> bool:
+        """Its surface moves during a run (posed before every step): a rigid motion, or a deforming body."""
+        return self.moving
+
+    def rewind(self) -> None:
+        """Back to t = 0: where it starts."""
+        self.move(0.0, 0.0)
 
     def move(self, t0: float, t1: float) -> None:
         """The poses of a step from t0 to t1 [s] (a moving collider; nothing for a still one)."""

@@ -20,8 +20,9 @@ from clothbase.fields import FieldBlock
 from clothbase.meshes import validate_triangle_mesh
 
 from .base import BAND_HELD, ParticleCollider
-from .geometry import closest_point_on_triangle, collision_possibility, inside_triangle, segment_triangle, solid_angle
-from .grid import VoxelGrid
+from .geometry import (barycentric, carry_point, closest_point_on_triangle, collision_possibility, inside_triangle,
+                       segment_triangle, solid_angle)
+from .grid import VoxelGrid, pairs_bound
 
 MODES = ("fuzzy", "exact")
 _CANDIDATES, _TESTS, _HITS, _CONTACTS, _OVERFLOW, _QUERIES = range(6)
@@ -42,15 +43,21 @@ class MeshCollider(ParticleCollider):
     the direction alone decides, for measuring what the gate saves); repulsion: None, or Repulsion keyword
     arguments (stiffness, distance, max_force) to add Fan et al. 1998's repulsion force; motion: a scripted rigid
     motion of the body (clothbase.keyframes.RigidMotion: its tests run in the body's frame as built, on each
-    particle's motion relative to it, so the grid is never rebuilt), or None.
+    particle's motion relative to it, so the grid is never rebuilt), or None; sequence: a deforming body
+    (clothbase.sequences.MeshSequence, whose first frame `vertices` and `triangles` are), posed on the device
+    before every step from `start` [s] (or "sewn": once `ready()` is true), or None. A deforming body's grid bins
+    each triangle's box over a window of frames, refilled on the device when a step leaves it; each particle's
+    start point is carried with each candidate triangle (geometry.carry_point), so the tests run on its motion
+    relative to the surface there, and a contact takes the surface's velocity at its closest point.
 
-    Fields: vertices (V,) vec3 f32, triangles (T,) ivec3, normals (T,) unit vec3 f32, counters (6,) i64.
+    Fields: vertices (V,) vec3 f32 (a deforming body: at the end of the step; vertices_start at its start),
+    triangles (T,) ivec3, normals (T,) unit vec3 f32, counters (6,) i64.
     """
 
     def __init__(self, vertices, triangles, thickness: float = 0.003, friction: float = 0.3,
                  cell_size: float | None = None, max_step: float = 0.05, mode: str = "fuzzy",
                  max_candidates: int = 256, passes: int = 2, reach_gate: bool = True, repulsion: dict | None = None,
-                 source: str = "body", motion=None):
+                 source: str = "body", motion=None, sequence=None, start=0.0):
         v = np.asarray(vertices, dtype=np.float64)
         t = np.asarray(triangles, dtype=np.int64)
         validate_triangle_mesh(v, t, source)
@@ -60,9 +67,18 @@ class MeshCollider(ParticleCollider):
             raise ValueError(f"collision thickness must be > 0 m, got {thickness}")
         if friction < 0:
             raise ValueError(f"friction must be >= 0, got {friction}")
-        if motion is not None and repulsion:
+        if (motion is not None or sequence is not None) and repulsion:
             raise ValueError(f"{source}: a moving body has no repulsion force (give it keyframes or repulsion)")
+        if motion is not None and sequence is not None:
+            raise ValueError(f"{source}: a mesh sequence moves itself: give it no keyframes or rotation")
+        if sequence is not None and (sequence.frames.shape[1] != len(v) or not np.array_equal(sequence.triangles, t)):
+            raise ValueError(f"{source}: the vertices and triangles must be the sequence's first frame")
+        if start != "sewn" and not (isinstance(start, (int, float)) and start >= 0):
+            raise ValueError(f"{source}: start must be a time >= 0 s or 'sewn', got {start!r}")
         self.source, self.mode, self.motion = source, mode, motion
+        self.sequence, self.start, self.ready = sequence, start, None
+        self.begin = None if start == "sewn" else float(start)  # [s] the run time at which the sequence starts
+        self.deforming = sequence is not None
         self.thickness, self.friction, self.passes = float(thickness), float(friction), int(passes)
         self.max_candidates = int(max_candidates)
         self.reach_gate = bool(reach_gate)
@@ -77,32 +93,130 @@ class MeshCollider(ParticleCollider):
         self.normals = blk.vector(3, ti.f32, len(t))
         self.n_triangles = blk.scalar(ti.i32, ())
         self.counters = blk.scalar(ti.i64, 6)
+        self.vertices_start = self.frames = self.sweep = self.box_lo = self.box_hi = None
+        if self.deforming:
+            self.vertices_start = blk.vector(3, ti.f32, len(v))
+            # each vertex's box over the frames of the window the grid was built for: lo, hi [m]
+            self.box_lo = blk.vector(3, ti.f32, len(v))
+            self.box_hi = blk.vector(3, ti.f32, len(v))
+            self.frames = blk.vector(3, ti.f32, (sequence.n_frames, len(v)))
+            self.sweep = blk.scalar(ti.f32, ())  # [m] the farthest a vertex moves in the step
         blk.finalize(self)
         self.vertices.from_numpy(v.astype(np.float32))
         self.triangles.from_numpy(t.astype(np.int32))
         self.n_triangles[None] = len(t)
         self._compute_normals()
-        self.grid = VoxelGrid(self.vertices, self.triangles, self.n_triangles, self.cell_size,
-                              pad=self.thickness, margin=self.thickness + max_step, vertices_np=v,
-                              triangles_np=t)
-        self.vertices_np = v
+        grid = {}
+        if self.deforming:
+            self.frames.from_numpy(sequence.frames.astype(np.float32))
+            self.vertices_start.copy_from(self.vertices)
+            self.box_lo.copy_from(self.vertices)
+            self.box_hi.copy_from(self.vertices)
+            travel = float(np.linalg.norm(np.diff(sequence.frames, axis=0), axis=2).max()) if len(sequence.frames) > 1 \
+                else 0.0  # the most a vertex moves between two frames
+            capacity = max(pairs_bound(f, t, self.cell_size, self.thickness, True, travel) for f in sequence.frames)
+            grid = dict(vertices_start=self.box_lo, bounds=sequence.bounds(), capacity=int(capacity) + 64)
+        # a deforming body bins its triangles over a window of its frames (box_lo..box_hi), refilled when a step
+        # leaves it: with a sequence of 30 frames/s and steps of 1/120 s, every fourth step
+        self.grid = VoxelGrid(self.box_hi if self.deforming else self.vertices, self.triangles, self.n_triangles,
+                              self.cell_size, pad=self.thickness, margin=self.thickness + max_step, vertices_np=v,
+                              triangles_np=t, **grid)
+        self._vertices_np = v
+        self._posed = None  # a deforming body: the (frame, weight) pair of the last pose
+        self._window = (0, 0)  # the frames the grid's boxes span
         self._attached = False
         self.repulsion = Repulsion(self, **repulsion) if repulsion else None
         self._last_distance = None  # (vertices_np, points, signed distances) of the last signed_distance call
 
     # ------------------------------------------------------------------ body motion
+    @property
+    def vertices_np(self) -> np.ndarray:
+        """The body's vertices now (V,3) float64 [m] (a deforming body: at the last step's end)."""
+        if self.deforming and self._vertices_np is None:
+            self._vertices_np = self.sequence.at(self.t_pose)
+        return self._vertices_np
+
+    @property
+    def animated(self) -> bool:
+        return self.motion is not None or self.deforming
+
     def set_vertices(self, vertices) -> None:
         """Move or morph the body (same topology) [m]: refreshes normals and rebuilds the grid."""
+        if self.deforming:
+            raise ValueError(f"{self.source}: a mesh sequence poses itself (its frames give the vertices)")
         v = np.asarray(vertices, dtype=np.float64)
         if v.shape != (self.n_vertices, 3):
             raise ValueError(f"{self.source}: expected {self.n_vertices} vertices, got {v.shape}")
-        self.vertices_np = v
+        self._vertices_np = v
         self.vertices.from_numpy(v.astype(np.float32))
         self._compute_normals()
         self.grid.build(v)
 
+    def move(self, t0: float, t1: float) -> None:
+        """The poses of a step from t0 to t1 [s]: a rigid motion's (ParticleCollider.move), or a deforming body's
+        frames at both ends, interpolated on the device, its normals and its grid refilled (no read)."""
+        if not self.deforming:
+            super().move(t0, t1)
+            return
+        if self.begin is None and t1 > t0 and (self.ready is None or self.ready()):
+            self.begin = t0
+        s0, s1 = (t0 - self.begin, t1 - self.begin) if self.begin is not None else (0.0, 0.0)
+        self.t_pose = s1
+        key = (self.sequence.position(s0), self.sequence.position(s1))
+        if key == self._posed:
+            return  # held: nothing moves (before the start, after the end)
+        self._posed = key
+        self._vertices_np = None
+        (k0, w0), (k1, w1) = key
+        self._pose(k0, w0, k1, w1, 1.0 / (t1 - t0) if t1 > t0 else 0.0)
+        window = (k0, min(k1 + 1, self.sequence.n_frames - 1) if w1 > 0 else k1)
+        if not (self._window[0] <= window[0] and window[1] <= self._window[1]):
+            self._window = window
+            self._bin_window(*window)
+            self.grid.rebuild()
+
+    def rewind(self) -> None:
+        """Back to t = 0: the body where it starts (a deforming body waits for its start again)."""
+        if self.deforming:
+            self.begin = None if self.start == "sewn" else float(self.start)
+            self._posed = None
+            self._window = (-1, -1)  # binned again
+        self.move(0.0, 0.0)
+
+    @ti.kernel
+    def _pose(self, k0: ti.i32, w0: ti.f32, k1: ti.i32, w1: ti.f32, inv_dt: ti.f64):
+        """A deforming body at the start (frame k0 and the next, weight w0) and the end (k1, w1) of the step; inv_dt
+        [1/s] of the step (surface velocities)."""
+        self.inv_dt[None] = inv_dt
+        self.sweep[None] = 0.0
+        last = self.frames.shape[0] - 1
+        for v in range(self.n_vertices):
+            a = (1.0 - w0) * self.frames[k0, v] + w0 * self.frames[ti.min(k0 + 1, last), v]
+            b = (1.0 - w1) * self.frames[k1, v] + w1 * self.frames[ti.min(k1 + 1, last), v]
+            self.vertices_start[v] = a
+            self.vertices[v] = b
+            ti.atomic_max(self.sweep[None], (b - a).norm())  # a maximum: the same whatever the threads' order
+        self.normals_pass()
+
+    @ti.kernel
+    def _bin_window(self, first: ti.i32, last: ti.i32):
+        """Each vertex's box over frames first..last (the grid's triangle boxes; a vertex's path between two frames
+        is the straight line between them, so the box of the frames holds every pose in between)."""
+        for v in range(self.n_vertices):
+            lo = self.frames[first, v]
+            hi = lo
+            for k in range(first + 1, last + 1):
+                lo = ti.min(lo, self.frames[k, v])
+                hi = ti.max(hi, self.frames[k, v])
+            self.box_lo[v] = lo
+            self.box_hi[v] = hi
+
     @ti.kernel
     def _compute_normals(self):
+        self.normals_pass()
+
+    @ti.func
+    def normals_pass(self):
         ti.loop_config(serialize=self.serial)
         for t in range(self.n_triangles[None]):
             c = self.triangles[t]
@@ -120,6 +234,20 @@ class MeshCollider(ParticleCollider):
     def resolve(self, dt: float) -> None:
         """After the step: find crossings and contacts of every particle and respond (positions, velocities)."""
         self._resolve(self.thickness, self.friction)
+
+    @property
+    def report_slots(self) -> int:
+        """A deforming body's grid reports the most (triangle, cell) pairs its rebuilds asked for with the frame's
+        measurement (its one read)."""
+        return 1 if self.deforming else 0
+
+    @ti.kernel
+    def report(self, out: ti.template(), offset: ti.i32):
+        out[offset] = ti.cast(self.grid.needed[None], ti.f64)
+        self.grid.needed[None] = 0
+
+    def reported(self, values) -> None:
+        self.grid.check_capacity(int(values[0]))
 
     def reset_counters(self) -> None:
         self.counters.fill(0)
@@ -149,9 +277,13 @@ class MeshCollider(ParticleCollider):
                 if not seen:
                     if n < self.max_candidates:
                         nrm = self.normals[t]
-                        height = (ti.cast(p, ti.f32) - self.vertices[self.triangles[t][0]]).dot(nrm)
+                        start = self._carried(t, ti.cast(p, ti.f32))
+                        height = (start - self.vertices[self.triangles[t][0]]).dot(nrm)
+                        relative = motion
+                        if ti.static(self.deforming):
+                            relative = ti.cast(q, ti.f32) - start
                         self.cand[i, n] = t
-                        self.cand_mu[i, n] = collision_possibility(height, motion, nrm, self.reach_gate)
+                        self.cand_mu[i, n] = collision_possibility(height, relative, nrm, self.reach_gate)
                         n += 1
                     else:
                         overflow = 1
@@ -175,8 +307,9 @@ class MeshCollider(ParticleCollider):
                 scanned += 1
                 v0, v1, v2 = self._corners(t)
                 nrm = self.normals[t]
-                if collision_possibility((pf - v0).dot(nrm), qf - pf, nrm, self.reach_gate) > 0:
-                    crossed, s = segment_triangle(pf, qf, v0, v1, v2)
+                start = self._carried(t, pf)
+                if collision_possibility((start - v0).dot(nrm), qf - start, nrm, self.reach_gate) > 0:
+                    crossed, s = segment_triangle(start, qf, v0, v1, v2)
                     tests += 1
                     if crossed and s < best_t:
                         hit, best_t = t, s
@@ -187,6 +320,28 @@ class MeshCollider(ParticleCollider):
     def _corners(self, t):
         c = self.triangles[t]
         return self.vertices[c[0]], self.vertices[c[1]], self.vertices[c[2]]
+
+    @ti.func
+    def _carried(self, t, p):
+        """The step's start point p (f32) of a particle, carried with triangle t to the step's end (a deforming
+        body; p itself for a body that keeps its shape): its motion relative to the triangle ends at q."""
+        out = p
+        if ti.static(self.deforming):
+            c = self.triangles[t]
+            out = carry_point(p, self.vertices_start[c[0]], self.vertices_start[c[1]], self.vertices_start[c[2]],
+                              self.vertices[c[0]], self.vertices[c[1]], self.vertices[c[2]])
+        return out
+
+    @ti.func
+    def _velocity_at(self, t, x):
+        """A deforming body's velocity [m/s] over the step at the point of triangle t closest to x (f32): its
+        corners' velocities by the barycentric weights of that point."""
+        c = self.triangles[t]
+        a, b, cc = self._corners(t)
+        w = barycentric(closest_point_on_triangle(x, a, b, cc), a, b, cc)
+        moved = w[0] * (a - self.vertices_start[c[0]]) + w[1] * (b - self.vertices_start[c[1]]) + \
+            w[2] * (cc - self.vertices_start[c[2]])
+        return ti.cast(moved, ti.f64) * self.inv_dt[None]
 
     @ti.func
     def _crossing(self, i, n, p, q):
@@ -201,7 +356,7 @@ class MeshCollider(ParticleCollider):
                 if self.cand_mu[i, k] > 0:
                     t = self.cand[i, k]
                     a, b, c = self._corners(t)
-                    hit, s = segment_triangle(pf, qf, a, b, c)
+                    hit, s = segment_triangle(self._carried(t, pf), qf, a, b, c)
                     tests += 1
                     if hit and s < best_t:
                         best, best_t = t, s
@@ -218,7 +373,7 @@ class MeshCollider(ParticleCollider):
                 self.cand_mu[i, kmax] = -1.0  # tested
                 t = self.cand[i, kmax]
                 a, b, c = self._corners(t)
-                hit, s = segment_triangle(pf, qf, a, b, c)
+                hit, s = segment_triangle(self._carried(t, pf), qf, a, b, c)
                 tests += 1
                 if hit:
                     best = t
@@ -281,6 +436,8 @@ class MeshCollider(ParticleCollider):
                     if n == 0:
                         break
                     reach = ti.cast(thickness, ti.f32) + ti.cast((q - p).norm(), ti.f32)
+                    if ti.static(self.deforming):  # the surface may have come towards the particle too
+                        reach += self.sweep[None]
                     hit, tests, near, gap, direction = -1, 0, -1, ti.cast(0.0, ti.f32), ti.Vector.zero(ti.f32, 3)
                     if overflow:
                         scanned = 0
@@ -309,6 +466,8 @@ class MeshCollider(ParticleCollider):
                         if ti.static(self.moving):
                             band_normal = ti.cast(self.turn(1, direction), self.x.dtype)
                             resting = ti.cast(self.surface_velocity(q), self.x.dtype)
+                        if ti.static(self.deforming):
+                            resting = ti.cast(self._velocity_at(near, ti.cast(q, ti.f32)), self.x.dtype)
                         self.record_contact(i, band_normal, ti.cast(friction, self.x.dtype), resting)
                         break
                     else:
@@ -321,6 +480,9 @@ class MeshCollider(ParticleCollider):
                         self.x[i] = ti.cast(self.to_world(1, end), self.x.dtype)
                         nrm = ti.cast(self.turn(1, direction), self.x.dtype)
                         surface = ti.cast(self.surface_velocity(end), self.x.dtype)
+                    if ti.static(self.deforming):
+                        touched = hit if hit >= 0 else near
+                        surface = ti.cast(self._velocity_at(touched, ti.cast(self.x[i], ti.f32)), self.x.dtype)
                     crossed = hit >= 0
                     self.record_contact(i, nrm, ti.cast(friction, self.x.dtype), surface)
                     self.respond(i, nrm, surface, ti.cast(friction, self.x.dtype))

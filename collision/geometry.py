@@ -122,6 +122,20 @@ def barycentric(p, a, b, c):
 
 
 @ti.func
+def carry_point(p, a0, b0, c0, a1, b1, c1):
+    """Where point p goes when carried with triangle (a0, b0, c0) as it moves to (a1, b1, c1): the same barycentric
+    weights in the triangle's plane and the same height along its unit normal. Exact for a rigid motion; for a
+    deforming surface, its local motion near the triangle. A degenerate triangle carries p with its centroid."""
+    n0 = (b0 - a0).cross(c0 - a0)
+    n1 = (b1 - a1).cross(c1 - a1)
+    w = barycentric(p, a0, b0, c0)  # zeros for a degenerate triangle
+    out = p + ((a1 + b1 + c1) - (a0 + b0 + c0)) / 3.0
+    if w.sum() > 0.5 and n1.norm() > 0:
+        out = w[0] * a1 + w[1] * b1 + w[2] * c1 + (p - a0).dot(n0.normalized()) * n1.normalized()
+    return out
+
+
+@ti.func
 def closest_segment_params(p1, q1, p2, q2):
     """Parameters (s, t) in [0, 1] of the closest points p1 + s (q1 - p1) and p2 + t (q2 - p2) of two segments
     (Ericson, Real-Time Collision Detection, 5.1.9); parallel segments give s = 0."""

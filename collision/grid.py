@@ -6,7 +6,8 @@ plus `margin` with a fixed number of cells, so rebuilding after the mesh moves o
 fields (no reallocation, no recompile) while the mesh stays within the allocated extent. Hashed mode
 (Teschner et al. 2003: hash(i,j,k) = (73856093 i ^ 19349663 j ^ 83492791 k) mod a prime) has no bounds, for a
 mesh that travels (the cloth itself, for self-collision); cells sharing a bucket only add candidates. With
-`vertices_start` the boxes span each triangle's start and end positions (swept over a step).
+`vertices_start` the boxes span each triangle's start and end positions (swept over a step). With `bounds` a dense
+grid covers a region known in advance (a mesh sequence's every frame) once, and is never re-centred.
 
 `build` rebuilds from the host and checks the capacity at once (one read). A grid rebuilt on the device without a
 read (self-collision: `build_pass` inside a kernel, or the `rebuild` launches) follows its 0-d `active` flag (0: its
@@ -31,12 +32,14 @@ class VoxelGrid:
 
     cell_start: (C+1,) i32 CSR offsets; cell_triangles: (pair capacity,) i32 triangle ids; origin: 0-d vec3 [m];
     dims: the grid size in cells (fixed). `triangles` is a (T,) ivec3 field, `n_triangles` a 0-d i32 field.
-    `grow` leaves room for the mesh to grow by that factor in extent and in (triangle, cell) pairs.
+    `grow` leaves room for the mesh to grow by that factor in extent and in (triangle, cell) pairs; `bounds` (lo,
+    hi) [m]: the box the mesh stays in for its whole life (the grid covers it plus `margin`, fixed); `capacity`:
+    the (triangle, cell) pairs to hold, when the caller knows better (a deforming mesh).
     """
 
     def __init__(self, vertices, triangles, n_triangles, cell_size: float, pad: float, margin: float,
                  vertices_np: np.ndarray, triangles_np: np.ndarray, grow: float = 1.25, hashed: bool = False,
-                 vertices_start=None, serial: bool = False):
+                 vertices_start=None, serial: bool = False, bounds=None, capacity: int | None = None):
         if not cell_size > 0:
             raise ValueError(f"voxel cell size must be > 0 m, got {cell_size}")
         self.vertices, self.triangles, self.n_triangles = vertices, triangles, n_triangles
@@ -49,11 +52,14 @@ class VoxelGrid:
             self.dims = (0, 0, 0)
             self.n_cells = _prime_at_least(int(hashed_cells(pairs, grow)))
         else:
-            lo, hi = vertices_np.min(0) - margin, vertices_np.max(0) + margin
+            lo, hi = (vertices_np.min(0), vertices_np.max(0)) if bounds is None else map(np.asarray, bounds)
+            lo, hi = lo - margin, hi + margin
             self.dims = tuple(int(math.ceil(grow * (h - a) / cell_size)) + 2 for a, h in zip(lo, hi))
             self.n_cells = self.dims[0] * self.dims[1] * self.dims[2]
         n_cells = self.n_cells
-        if hashed or self.swept:
+        if capacity is not None:
+            self.pair_capacity = int(capacity)
+        elif hashed or self.swept:
             # a moving mesh (cloth folding, moving fast): room for every triangle turned any way
             self.pair_capacity = self._pairs_bound_np(vertices_np, triangles_np) + 64
         else:
@@ -70,6 +76,9 @@ class VoxelGrid:
         blk.finalize(self)
         self.active[None] = 1
         self.n_pairs = 0
+        self.fixed = bounds is not None and not hashed
+        if self.fixed:
+            self.origin[None] = (0.5 * (lo + hi) - 0.5 * np.array(self.dims) * self.cell_size).tolist()
         self.build(vertices_np)
 
     def _count_pairs_np(self, v, t) -> int:
@@ -84,7 +93,7 @@ class VoxelGrid:
     def build(self, vertices_np: np.ndarray | None = None) -> int:
         """(Re)bin every triangle; call after the mesh moved. The grid is re-centred on the mesh bounds (from
         `vertices_np` if given, else read back). Returns the number of (triangle, cell) pairs."""
-        if not self.hashed:
+        if not self.hashed and not self.fixed:
             v = self.vertices.to_numpy() if vertices_np is None else vertices_np
             centre = 0.5 * (v.min(0) + v.max(0))
             extent = np.array(self.dims) * self.cell_size
@@ -253,13 +262,14 @@ class VoxelGrid:
                 self.cell_triangles[b + 1] = t
 
 
-def pairs_bound(v: np.ndarray, t: np.ndarray, cell_size: float, pad: float, swept: bool = True) -> float:
+def pairs_bound(v: np.ndarray, t: np.ndarray, cell_size: float, pad: float, swept: bool = True,
+                travel: float = 0.0) -> float:
     """(triangle, cell) pairs of mesh (v (V,3) [m], t (T,3)) in any pose that keeps its edge lengths, each triangle's
-    box widened by `pad` [m] and (swept) moved by up to a cell in a step: a box of extent e along an axis meets at
-    most floor(e / cell) + 2 cells, and e is at most the longest edge plus twice the pad. A float: a tiny cell can
-    make it too large for an integer."""
+    box widened by `pad` [m] and (swept) moved by up to a cell, or by `travel` [m] more, in a step: a box of extent
+    e along an axis meets at most floor(e / cell) + 2 cells, and e is at most the longest edge plus twice the pad.
+    A float: a tiny cell can make it too large for an integer."""
     longest = np.linalg.norm(v[t] - v[t[:, [1, 2, 0]]], axis=2).max(1)
-    per_axis = np.floor((longest + 2 * pad) / cell_size) + (3 if swept else 2)
+    per_axis = np.floor((longest + 2 * pad + travel) / cell_size) + (3 if swept else 2)
     return float((per_axis ** 3).sum())
 
 

@@ -163,6 +163,9 @@ def assemble(cloth, *, name: str = "cloth", integrator: str = DEFAULT_INTEGRATOR
     sew = _sewing(model, state, forces, contacts, source.garment, sewing, source.garment_levels) \
         if source.garment is not None else None
     morph = _body_morph(body_morph, collide, sew, clock.dt) if body_morph is not None else None
+    for body in collide.bodies if collide is not None else []:
+        if body.deforming and body.start == "sewn" and sew is not None:  # its motion begins once the seams are joined
+            body.ready = lambda: not sew.active
     refiner = None
     if source.multilevel is not None:
         ready = (lambda: sew.joined) if sew is not None else None  # a garment refines once its seams are joined

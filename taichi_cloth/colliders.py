@@ -29,6 +29,7 @@ import numpy as np
 
 from clothbase.keyframes import RigidMotion
 from clothbase.meshes import load_triangle_mesh, open_mesh_warning
+from clothbase.sequences import MeshSequence, load_mesh_sequence
 from collision import MeshCollider, PrimitiveColliders
 from collision.mannequin import load_mannequin
 from collision.primitives import STANDIN_CAPSULES, STANDIN_SPHERES
@@ -52,6 +53,18 @@ def body_mesh(path: str, scale: float = 1.0, translate=(0.0, 0.0, 0.0), base_dir
     return load_triangle_mesh(p, scale, translate)
 
 
+def body_sequence(spec: dict, base_dir: Path | None = None) -> MeshSequence:
+    """The MeshSequence of a mesh collider's `sequence` (a MeshSequence, or a .npz or folder of frames relative to
+    base_dir, read with its fps, scale and translate); MeshError names the file when it is unusable."""
+    seq = spec["sequence"]
+    if isinstance(seq, MeshSequence):
+        return seq
+    p = Path(seq)
+    if not p.is_absolute() and base_dir is not None:
+        p = base_dir / p
+    return load_mesh_sequence(p, spec.get("fps"), spec.get("scale", 1.0), spec.get("translate", (0.0, 0.0, 0.0)))
+
+
 #: [m] the motion per step a mesh collider's voxel grid leaves room for (MeshCollider's max_step)
 MAX_STEP = inspect.signature(MeshCollider).parameters["max_step"].default
 
@@ -72,22 +85,27 @@ def build_colliders(specs, base_dir: Path | None = None) -> list:
         motion = None
         if spec.get("keyframes") is not None or spec.get("rotation") is not None:
             motion = RigidMotion(spec.get("keyframes"), spec.get("rotation"), spec.get("pivot", (0.0, 0.0, 0.0)))
+        sequence = None
         if kind == "mesh":
             if "vertices" in spec:  # a body given as arrays (e.g. a fitted taichi_cloth.body morph)
                 v, t = spec["vertices"], spec["triangles"]
+            elif "sequence" in spec:  # a deforming body
+                sequence = body_sequence(spec, base_dir)
+                v, t = sequence.frames[0], sequence.triangles
             else:
                 v, t = body_mesh(spec["path"], spec.get("scale", 1.0), spec.get("translate", (0.0, 0.0, 0.0)),
                                  base_dir)
-            open_mesh_warning(t, str(spec["path"]))
+            name = str(spec.get("path") or sequence.source)
+            open_mesh_warning(t, name)
             cell = spec.get("cell_size")
             if cell is not None:  # the default (1.5 x the mean edge) bins each triangle into a few cells
                 check_voxel_grid(v, t, cell, thickness, thickness + MAX_STEP, f"{where} cell_size {cell:g} m "
-                                 f"(mesh {spec['path']})")
+                                 f"(mesh {name})")
             if motion is not None and spec.get("repulsion"):
                 raise SceneError(f"{where}: a moving body has no repulsion force (give it keyframes or repulsion)")
             out.append(MeshCollider(v, t, thickness=thickness, friction=friction, cell_size=cell,
                                     mode=spec.get("mode", "fuzzy"), repulsion=spec.get("repulsion"),
-                                    source=str(spec["path"]), motion=motion))
+                                    source=name, motion=motion, sequence=sequence, start=spec.get("start", 0.0)))
         elif kind in ("sphere", "capsule", "plane", "standin"):
             # still shapes of equal thickness and friction share one object; a moving one has its own (its motion)
             key = (thickness, friction) if motion is None else (thickness, friction, k)
@@ -122,7 +140,9 @@ class Colliders(Controller):
 
     def __init__(self, model, state, objects: list, contacts):
         self.objects, self.state, self.contacts = list(objects), state, contacts
-        self.moving: set[int] = set()
+        # a deforming body is drawn anew every frame
+        self.moving: set[int] = {k for k, c in enumerate(self.objects) if getattr(c, "deforming", False)}
+        self._drawn: dict[int, float] = {}  # a deforming body: the time of its pose last recorded
         for c in self.objects:
             c.attach(state.x, state.v, model.inv_mass, model.n_particles, contacts.normal, model.serial,
                      contacts.friction, contacts.before, contacts.velocity)
@@ -152,16 +172,25 @@ class Colliders(Controller):
         return next((c for c in self.objects if isinstance(c, SelfCollision)), None)
 
     @property
+    def _reporters(self) -> list:
+        return [c for c in self.objects if getattr(c, "report_slots", 0)]
+
+    @property
     def report_slots(self) -> int:
-        """Self-collision's per-frame values (its grid's capacity check) travel with the frame's measurement."""
-        sc = self.self_collision
-        return sc.report_slots if sc is not None else 0
+        """The per-frame values of self-collision and of deforming bodies (their grids' capacity checks) travel with
+        the frame's measurement."""
+        return sum(c.report_slots for c in self._reporters)
 
     def report(self, out, offset: int) -> None:
-        self.self_collision.report(out, offset)
+        for c in self._reporters:
+            c.report(out, offset)
+            offset += c.report_slots
 
     def reported(self, values) -> None:
-        self.self_collision.reported(values)
+        k = 0
+        for c in self._reporters:
+            c.reported(values[k:k + c.report_slots])
+            k += c.report_slots
 
     @property
     def bodies(self) -> list:
@@ -176,14 +205,14 @@ class Colliders(Controller):
     def inline_step(self) -> tuple | None:
         """The primitive colliders (spheres, capsules, planes), whose resolve touches one particle at a time; None
         when a body mesh or self-collision is among the colliders, or one moves (its pose changes every step)."""
-        if any(c.moving for c in self.objects):
+        if any(c.animated for c in self.objects):
             return None
         return tuple(self.objects) if all(isinstance(c, PrimitiveColliders) for c in self.objects) else None
 
     @property
     def per_step(self) -> bool:
         """A scripted motion poses its collider before every step."""
-        return any(c.moving for c in self.objects)
+        return any(c.animated for c in self.objects)
 
     def before_step(self, t: float, dt: float) -> None:
         """The poses of the moving colliders at the start and the end of the step from t over dt [s]."""
@@ -192,8 +221,9 @@ class Colliders(Controller):
 
     def reset(self) -> None:
         """Back to t = 0: the moving colliders where they start."""
+        self._drawn.clear()
         for c in self.objects:
-            c.move(0.0, 0.0)
+            c.rewind()
 
     def begin(self, state, contacts, dt: float | None = None) -> None:
         """A step of `state` begins: every collider remembers where the particles start (its crossing tests run
@@ -227,7 +257,10 @@ class Colliders(Controller):
             layout.colliders.append(dict(c.describe(), moving=k in self.moving))
 
     def record(self, frame) -> None:
-        """The pose of each collider on a scripted path, now."""
+        """The pose of each collider on a scripted path, and the surface of each deforming body that moved, now."""
         for k, c in enumerate(self.objects):
             if c.moving:
                 frame.poses[k] = c.pose_now()
+            elif getattr(c, "deforming", False) and self._drawn.get(k) != c.sequence.position(c.t_pose):
+                self._drawn[k] = c.sequence.position(c.t_pose)
+                frame.meshes[k] = c.vertices_np.astype(np.float32)

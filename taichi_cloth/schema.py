@@ -96,6 +96,7 @@ KINDS: dict[str, tuple[Callable[[Any], bool], str]] = {
     "names": (lambda v: isinstance(v, dict) and all(is_int(i) for i in v.values()),
               "a table of corner name = index"),
     "dt": (lambda v: v == "auto" or is_number(v), 'a number of seconds or "auto"'),
+    "start": (lambda v: v == "sewn" or (is_number(v) and v >= 0), 'a time >= 0 [s] or "sewn"'),
 }
 
 MATERIAL_TABLE = Table({"preset": Field("str", None, choices=tuple(MATERIALS)),

@@ -4,11 +4,12 @@ keys with the same line: `[[colliders]] #2: unknown key 'radus' (did you mean 'r
 
 A collider (SI units; taichi_cloth.colliders builds it):
     type = "sphere" (center, radius) | "capsule" (a, b, radius) | "plane" (point, normal) | "mesh" (path: a file or
-    "mannequin", scale, translate, cell_size, mode = "fuzzy" | "exact", repulsion = {stiffness, distance,
-    max_force}) | "standin"; every type: thickness [m] = 0.003 (> 0 for a mesh, >= 0 for the others), friction = 0.3,
-    and a scripted rigid motion: keyframes = [[t, dx, dy, dz], ...] (translation [s, m]), rotation = [[t, ax, ay,
-    az], ...] (degrees about the x, y, z axes through pivot [m], default the origin), linear between keys and held
-    outside them (clothbase.keyframes)
+    "mannequin", or sequence: a deforming body's frames, a .npz or a folder of OBJ/PLY files, with fps [frames/s]
+    and start = a time [s] or "sewn"; scale, translate, cell_size, mode = "fuzzy" | "exact", repulsion =
+    {stiffness, distance, max_force}) | "standin"; every type: thickness [m] = 0.003 (> 0 for a mesh, >= 0 for the
+    others), friction = 0.3, and a scripted rigid motion: keyframes = [[t, dx, dy, dz], ...] (translation [s, m]),
+    rotation = [[t, ax, ay, az], ...] (degrees about the x, y, z axes through pivot [m], default the origin), linear
+    between keys and held outside them (clothbase.keyframes)
 A pin group (taichi_cloth.pins.PinSpec):
     indices = [i, ...], near = [[x, y, z], ...], box = {min = [x, y, z], max = [x, y, z]}: what it selects (at least
     one); keyframes = [[t, dx, dy, dz], ...]: its motion (rows in strictly increasing t)
@@ -24,6 +25,8 @@ import warnings
 
 import numpy as np
 
+from clothbase.sequences import MeshSequence
+
 from .schema import Field, Table, Validator, nonneg, nonzero, positive
 
 COLLIDER_TYPES = ("sphere", "capsule", "plane", "mesh", "standin")
@@ -32,7 +35,8 @@ MOTION_KEYS = ("keyframes", "rotation", "pivot")
 #: keys each collider type needs, and the optional ones it accepts (thickness and friction: every type)
 COLLIDER_KEYS = {"sphere": ({"center", "radius"}, set()), "capsule": ({"a", "b", "radius"}, set()),
                  "plane": ({"point", "normal"}, set()), "standin": (set(), set()),
-                 "mesh": ({"path"}, {"scale", "translate", "cell_size", "mode", "repulsion"})}
+                 "mesh": (set(), {"path", "sequence", "fps", "start", "scale", "translate", "cell_size", "mode",
+                                  "repulsion"})}
 DEFAULT_THICKNESS = 0.003  # m
 DEFAULT_FRICTION = 0.3
 
@@ -52,6 +56,16 @@ def _check_collider(v: Validator, col: dict, where: str) -> None:
             v.fail(f"{where} {key}", "times must increase strictly")
     if col.get("pivot") is not None and col.get("rotation") is None:
         v.fail(f"{where} pivot", "is the centre of a rotation: give rotation too")
+    if col["type"] == "mesh" and (col.get("path") is None) == (col.get("sequence") is None):
+        v.fail(where, "a mesh collider needs 'path' (a mesh file or \"mannequin\") or 'sequence' (a deforming "
+                      "body's frames), not both" if col.get("path") is not None else "a mesh collider needs 'path' "
+                      "(a mesh file or \"mannequin\") or 'sequence' (a deforming body's frames)")
+    if col.get("sequence") is None:
+        for key in ("fps", "start"):
+            if col.get(key) is not None:
+                v.fail(f"{where} {key}", "belongs to a mesh sequence: give sequence too")
+    elif col.get("keyframes") is not None or col.get("rotation") is not None:
+        v.fail(where, "a mesh sequence moves itself: give it no keyframes or rotation")
     if col["type"] == "mesh" and not col["thickness"] > 0:  # a sphere, capsule or plane may have none
         v.fail(f"{where} thickness", f"must be > 0 for a mesh collider, got {col['thickness']!r}")
     for key in [k for k, val in list(col.items()) if val is None]:
@@ -64,6 +78,7 @@ COLLIDER_TABLE = Table({
     "a": Field("vec3", None), "b": Field("vec3", None),
     "point": Field("vec3", None), "normal": Field("vec3", None, nonzero),
     "path": Field("str", None), "scale": Field("number", None, positive), "translate": Field("vec3", None),
+    "sequence": Field("str", None), "fps": Field("number", None, positive), "start": Field("start", None),
     "cell_size": Field("number", None, positive), "mode": Field("str", None, choices=("fuzzy", "exact")),
     "repulsion": Table({"stiffness": Field("number", 1e-3, nonneg), "distance": Field("number", 0.01, positive),
                         "max_force": Field("number", 0.05, positive)}),
@@ -102,10 +117,13 @@ def plain(value):
 def collider_table(spec: dict, where: str, validator: Validator | None = None) -> dict:
     """A collider dict of the Python API, checked as a scene file's collider table `where` ("[[colliders]] #2")
     is: SceneError naming the key and the value. Returns it with the defaults filled in and the absent keys
-    dropped; a mesh's `vertices` and `triangles` arrays (Python only) pass through unchanged."""
+    dropped; a mesh's `vertices` and `triangles` arrays and a MeshSequence (Python only) pass through unchanged."""
     v = validator or Validator("")
     if not isinstance(spec, dict):
         v.fail(where, f"must be a table (a dict), got {spec!r}")
+    sequence = spec.get("sequence") if isinstance(spec.get("sequence"), MeshSequence) else None
+    if sequence is not None:  # a sequence built in Python passes through; its source names it
+        spec = dict(spec, sequence=sequence.source)
     arrays = {k: spec[k] for k in ("vertices", "triangles") if k in spec}
     data = plain({k: x for k, x in spec.items() if k not in arrays and x is not None})
     if arrays:
@@ -116,6 +134,8 @@ def collider_table(spec: dict, where: str, validator: Validator | None = None) -
         data.setdefault("path", "mesh")  # a name for messages
     out = v.table(COLLIDER_TABLE, data, "colliders", where)
     out.update(arrays)
+    if sequence is not None:
+        out["sequence"] = sequence
     return out
 
 
