@@ -13,9 +13,9 @@ Suites of `python -m taichi_cloth bench SUITE` (each with add_arguments(parser) 
 accuracy: sampled runs and their distance to a reference, shared by tradeoff and peers. Each suite checks its
 arguments before any work (require, output_folder): a bad one is one `error:` line, never a traceback.
 
-Standalone scripts (`.venv/bin/python benchmarks/NAME.py`): approx_implicit_variants,
-multilevel_garment, multilevel_pays, preconditioner_choice, self_collision, self_collision_stress; and `python -m benchmarks.gpu_check`, the
-whole GPU measurement in one command (on a GPU machine lent for a few minutes).
+Standalone scripts (`.venv/bin/python benchmarks/NAME.py`): approx_implicit_variants, moving_body,
+multilevel_garment, multilevel_pays, preconditioner_choice, self_collision, self_collision_stress; and
+`python -m benchmarks.gpu_check`, the whole GPU measurement in one command (on a GPU machine lent for a few minutes).
 """
 import csv
 from pathlib import Path

@@ -6,15 +6,18 @@ targets and measuring girths are not done here. Imports numpy and the standard l
 """
 from __future__ import annotations
 
+import json
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-__all__ = ["DEFAULT_PATH", "Mannequin", "load_mannequin"]
+__all__ = ["DEFAULT_PATH", "JOINTS_PATH", "Mannequin", "load_mannequin", "load_joints"]
 
 DEFAULT_PATH = Path(__file__).resolve().parent / "data" / "mannequin.npz"
+#: the centres of MakeHuman's default skeleton joints on the mannequin (derived by collision/data/derive_rig.py)
+JOINTS_PATH = Path(__file__).resolve().parent / "data" / "mannequin_joints.json"
 
 
 @dataclass(frozen=True, eq=False)
@@ -111,3 +114,15 @@ def load_mannequin(path: str | Path | None = None) -> Mannequin:
 
     source = str(data["source"]) if "source" in data else ""
     return Mannequin(_read_only(vertices), _read_only(triangles), targets, source, path)
+
+
+def load_joints(path: str | Path | None = None) -> dict[str, np.ndarray]:
+    """name -> (3,) float64 [m]: the joint centres of MakeHuman's default skeleton on the shipped mannequin
+    ("pelvis", "spine-1" (chest) ... "spine-4" (lowest), "neck", "head", "l-shoulder", "l-elbow", "l-hand", "r-...";
+    l is the body's left, +x). Raises ValueError naming the file if it is not the expected JSON."""
+    path = JOINTS_PATH if path is None else Path(path)
+    try:
+        joints = json.loads(path.read_text(encoding="utf-8"))["joints"]
+        return {str(k): np.asarray(v, dtype=np.float64).reshape(3) for k, v in joints.items()}
+    except (OSError, ValueError, KeyError, TypeError) as e:
+        raise ValueError(f"malformed mannequin joints file {path}: {e}") from e

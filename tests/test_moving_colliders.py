@@ -112,3 +112,123 @@ def test_a_recording_places_a_moving_collider_at_every_frame(tmp_path):
     assert sorted(frames) == [0, 1, 2, 3, 4, 5]  # the start and five frames
     assert any("Transform3D" in c for c in columns)
     assert got["/cloth/colliders/spheres"][0] == 1  # the ball itself, once
+
+
+# ---------------------------------------------------------------------------------------------- a deforming body
+def ball_sequence(speed: float, fps: float = 30.0, radius=(0.15, 0.15)):
+    """An icosphere (642 vertices) crossing z = -0.5 .. 0.5 at `speed` [m/s] at y = 1 m, its radius [m] going
+    linearly from radius[0] to radius[1] meanwhile, as a mesh sequence at fps."""
+    import trimesh
+
+    from clothbase.sequences import MeshSequence
+
+    ico = trimesh.creation.icosphere(subdivisions=3, radius=1.0)
+    times = np.arange(0.0, 1.0 / speed + 0.5 / fps, 1.0 / fps)
+    s = np.clip(times * speed, 0.0, 1.0)
+    frames = [np.asarray(ico.vertices) * (radius[0] + f * (radius[1] - radius[0])) + [0.0, 1.0, -0.5 + f] for f in s]
+    return MeshSequence(np.stack(frames), ico.faces, fps, "ball")
+
+
+def test_a_mesh_sequence_interpolates_exactly_at_its_frames_and_reads_back_from_its_files(tmp_path):
+    """At k / fps the sequence is frame k exactly, halfway it is the mean of two frames, outside it is held; a .npz
+    and a folder of OBJ frames (numbered 1, 2, ..., 10: read in number order) give the same frames back."""
+    import trimesh
+
+    from clothbase.sequences import load_mesh_sequence, save_mesh_sequence
+
+    seq = ball_sequence(2.0, fps=20.0, radius=(0.1, 0.2))
+    assert seq.n_frames == 11 and seq.duration == pytest.approx(0.5)
+    for k in range(seq.n_frames):
+        assert np.array_equal(seq.at(k / seq.fps), seq.frames[k])
+    np.testing.assert_allclose(seq.at(2.5 / seq.fps), 0.5 * (seq.frames[2] + seq.frames[3]), rtol=0, atol=1e-15)
+    assert np.array_equal(seq.at(-1.0), seq.frames[0]) and np.array_equal(seq.at(9.0), seq.frames[-1])
+    back = load_mesh_sequence(save_mesh_sequence(tmp_path / "ball.npz", seq))
+    assert back.fps == 20.0 and np.array_equal(back.triangles, seq.triangles)
+    np.testing.assert_allclose(back.frames, seq.frames, rtol=0, atol=1e-6)  # float32 in the file
+    folder = tmp_path / "frames"
+    folder.mkdir()
+    for k, v in enumerate(seq.frames):
+        trimesh.Trimesh(v, seq.triangles, process=False).export(folder / f"ball_{k + 1}.obj")
+    back = load_mesh_sequence(folder, fps=20.0)
+    np.testing.assert_allclose(back.frames, seq.frames, rtol=0, atol=1e-6)
+
+
+def test_a_mesh_sequence_that_is_not_one_mesh_is_refused_naming_the_file(tmp_path):
+    import trimesh
+
+    from clothbase.errors import MeshError
+    from clothbase.sequences import load_mesh_sequence
+
+    folder = tmp_path / "frames"
+    folder.mkdir()
+    trimesh.creation.icosphere(subdivisions=1).export(folder / "f1.obj")
+    trimesh.creation.icosphere(subdivisions=2).export(folder / "f2.obj")
+    with pytest.raises(MeshError, match="f2.obj: not the topology of f1.obj"):
+        load_mesh_sequence(folder, fps=30)
+    with pytest.raises(MeshError, match="needs its frame rate"):
+        load_mesh_sequence(folder)
+    np.savez(tmp_path / "clip.npz", vertices=np.zeros((2, 3, 3)), triangles=np.array([[0, 1, 2]]))
+    with pytest.raises(MeshError, match="clip.npz: no frame rate"):
+        load_mesh_sequence(tmp_path / "clip.npz")
+
+
+@pytest.mark.parametrize("spec, words", [
+    ({"type": "mesh", "path": "mannequin", "sequence": "clip.npz"}, "'path' .* or 'sequence' .*, not both"),
+    ({"type": "mesh", "path": "mannequin", "fps": 30}, "fps: belongs to a mesh sequence"),
+    ({"type": "mesh", "sequence": "clip.npz", "keyframes": [[0, 0, 0, 0]]}, "moves itself"),
+    ({"type": "mesh", "sequence": "clip.npz", "start": "later"}, 'a time >= 0 \\[s\\] or "sewn"'),
+])
+def test_a_mesh_sequence_key_out_of_place_is_refused(spec, words):
+    from taichi_cloth.errors import SceneError
+    from taichi_cloth.specs import collider_table
+
+    with pytest.raises(SceneError, match=words):
+        collider_table(spec, "[[colliders]] #1")
+
+
+def test_no_particle_is_ever_inside_a_fast_growing_deforming_ball():
+    """The hanging sheet of the fast-sphere test against a mesh sequence: a ball crossing it at 2 m/s with 1/60 s
+    steps while its radius grows from 0.12 to 0.15 m (its surface sweeps the cloth at up to 2.03 m/s): at every step
+    every particle is outside the frame's mesh (exact signed distance, at least the thickness less round-off), and
+    the sheet was carried forward. The recorder gets the body's surface whenever it moved."""
+    from taichi_cloth.frame import FrameSnapshot
+
+    speed = 2.0
+    cloth = tc.ClothBuilder.grid((1.0, 1.0), (32, 32), "cotton", center=(0, 1.0, 0), plane="xy")
+    sc = tc.Scene(cloth, integrator="implicit", dt=1 / 60, pins=[{"near": [(-0.5, 1.5, 0), (0.5, 1.5, 0)]}],
+                  colliders=[{"type": "mesh", "sequence": ball_sequence(speed, radius=(0.12, 0.15))}])
+    collide = sc.controller("colliders")
+    ball = collide.objects[0]
+    deepest, reach = np.inf, 0.0
+    while sc.state.t < 1.0 / speed + 0.1:
+        sc.advance(1)
+        x = sc.positions()
+        deepest = min(deepest, ball.signed_distance(x).min())
+        reach = max(reach, x[:, 2].max())
+    assert deepest > 0.003 - 1e-4  # the thickness, less float32 round-off
+    assert reach > 0.3
+    np.testing.assert_allclose(ball.vertices.to_numpy(), ball.sequence.frames[-1], rtol=0, atol=1e-6)
+    frame = FrameSnapshot(0, 0.0, np.zeros((0, 3)), None, np.zeros((0, 3), int), 0)
+    collide.record(frame)
+    assert set(frame.meshes) == {0} and not frame.poses
+    sc.reset()  # back to the first frame
+    np.testing.assert_allclose(ball.vertices.to_numpy(), ball.sequence.frames[0], rtol=0, atol=1e-6)
+
+
+def test_the_skinned_mannequin_is_the_rest_body_at_zero_angles_and_turns_rigidly_with_its_root():
+    """Linear-blend skinning with no rotation gives the shipped body back; turning the root (the hips) turns the
+    whole body rigidly about the pelvis joint (every bone follows its parent, every weight row sums to 1); the clip
+    starts at the rest pose and is 3 s long."""
+    from clothbase.keyframes import rotation_xyz
+    from taichi_cloth.body.clip import clip_rotations
+    from taichi_cloth.body.skinning import SkinnedBody
+
+    body = SkinnedBody.mannequin()
+    np.testing.assert_allclose(body.weights.sum(1), 1.0, rtol=0, atol=1e-12)
+    assert np.abs(body.pose() - body.vertices).max() < 1e-12
+    assert np.abs(body.pose(clip_rotations(0.0)) - body.vertices).max() < 1e-12
+    R, c = rotation_xyz([10.0, -25.0, 40.0]), body.skeleton.joints["pelvis"]
+    assert np.abs(body.pose({"hips": R}) - ((body.vertices - c) @ R.T + c)).max() < 1e-12
+    arms = body.pose(clip_rotations(1.0))
+    hands = body.weights[:, body.skeleton.names.index("l-hand")] > 0.99
+    assert arms[hands, 0].mean() < body.vertices[hands, 0].mean() - 0.05  # the left hand came in towards the side
