@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..schema import read_toml
+from ..scenefile import parse_scene
 from .spec import MANNEQUIN, BatchError, BatchSpec
 
 #: the scene every job starts from unless [run] scene names one: the shipped garment scenes' settings
@@ -60,6 +61,8 @@ def make_jobs(spec: BatchSpec) -> list[Job]:
     combos = spec.jobs if spec.jobs is not None else [
         (g, b, m, {}) for g in spec.garments for b in spec.bodies for m in spec.materials]
     jobs = [make_job(spec, g, b, m, dict(spec.run, **overrides)) for g, b, m, overrides in combos]
+    for job in jobs:  # a mistake in [run] (an integrator option, a rest key) fails here, once, not in every job
+        parse_scene(job.scene, Path(job.base_dir), label=f"{spec.path}: [run] (job {job.label})")
     seen = {}
     for job in jobs:
         if job.key in seen:
@@ -89,8 +92,11 @@ def make_job(spec: BatchSpec, garment, body, material, run: dict) -> Job:
                          "morph": "before"}
     if run["quality"] is not None:
         scene["quality"] = run["quality"]
-    if run.get("integrator"):
-        scene["integrator"] = dict(scene.get("integrator", {}), **run["integrator"])
+    if run.get("integrator"):  # merged into the scene's; another integrator's name starts from its dt alone
+        integrator = scene.get("integrator", {})
+        if run["integrator"].get("name", integrator.get("name")) != integrator.get("name"):
+            integrator = {k: integrator[k] for k in ("dt",) if k in integrator}
+        scene["integrator"] = dict(integrator, **run["integrator"])
     if run.get("rest"):
         scene["rest"] = dict(scene.get("rest", {}), **run["rest"])
     settings = {k: run[k] for k in ("until_rest", "max_inside", "png", "record", "timeout")}

@@ -11,11 +11,12 @@ takes nothing else with it: the scheduler sees the process gone without a row an
 from __future__ import annotations
 
 import multiprocessing
+import os
 import signal
 from multiprocessing.connection import wait as wait_for
 from pathlib import Path
 
-from .worker import job_process, read_row
+from .worker import FAULT_ENV, job_process, read_row
 
 
 class ProcessPool:
@@ -31,8 +32,8 @@ class ProcessPool:
         self.running: dict = {}  # sentinel -> (process, job)
 
     def start(self, job: dict, attempt: int):
-        process = self.context.Process(target=job_process, args=(job, attempt), name=f"batch {job['label']}",
-                                       daemon=True)
+        process = self.context.Process(target=job_process, args=(job, attempt, os.environ.get(FAULT_ENV, "")),
+                                       name=f"batch {job['label']}", daemon=True)
         process.start()
         self.running[process.sentinel] = (process, job)
         return process.sentinel

@@ -207,8 +207,9 @@ def load_spec(path: str | Path, out: str | Path | None = None) -> BatchSpec:
                     v.fail(f"{where} {key}", f"{j[key]!r} is not one of the batch's {key}s: "
                                              f"{', '.join(names[key])}")
                 picked.append(names[key][j[key]])
-            overrides = v.table(Table(RUN_TABLE.fields), j["run"], "run", f"{where} run")
-            overrides = {key: val for key, val in overrides.items() if key in j["run"]}
+            given = j.get("run") or {}
+            overrides = v.table(Table(RUN_TABLE.fields), given, "run", f"{where} run")
+            overrides = {key: val for key, val in overrides.items() if key in given}
             _check_run(v, dict(run, **overrides), base, f"{where} run")
             jobs.append((*picked, overrides))
     out_dir = Path(out) if out is not None else Path(cfg["output"]["dir"])

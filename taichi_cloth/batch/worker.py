@@ -110,9 +110,11 @@ def read_row(folder: Path) -> dict | None:
         return None
 
 
-def job_process(job: dict, attempt: int) -> None:
+def job_process(job: dict, attempt: int, faults: str = "") -> None:
     """A worker process's life: output to the job's log, the job, its row written. Exits with 0 when the row is
-    written, 130 on Ctrl-C (no row: the job is not finished)."""
+    written, 130 on Ctrl-C (no row: the job is not finished). `faults`: the batch's TAICHI_CLOTH_BATCH_FAULT (the
+    process is forked from a server started earlier, whose environment may be older than the batch's)."""
+    os.environ[FAULT_ENV] = faults
     folder = Path(job["dir"])
     folder.mkdir(parents=True, exist_ok=True)
     log = open(folder / LOG_FILE, "a", encoding="utf-8")  # noqa: SIM115 (the process's stdout until it exits)
