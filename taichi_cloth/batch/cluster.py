@@ -13,7 +13,7 @@ import os
 import tempfile
 from pathlib import Path
 
-from .worker import FAULT_ENV, LOG_FILE, ROW_FILE, execute, write_row
+from .worker import FAULT_ENV, LOG_FILE, ROW_FILE, execute, save_cache, write_row
 
 INSTALL = "pip install -e '.[cluster]'"
 
@@ -26,6 +26,7 @@ def _task(job: dict, attempt: int) -> tuple[dict, dict]:
         os.dup2(log.fileno(), 1)
         os.dup2(log.fileno(), 2)
         row = execute(job, attempt)
+        save_cache()  # a Ray worker may end without its exit handlers too
         log.flush()
         files = {p.name: p.read_bytes() for p in Path(tmp).iterdir() if p.is_file()}
     return row, files

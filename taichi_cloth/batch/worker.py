@@ -13,6 +13,7 @@ exception inside the job).
 from __future__ import annotations
 
 import argparse
+import fcntl
 import json
 import os
 import socket
@@ -29,6 +30,8 @@ from .figures import BLEW_UP, ERROR, finished_row
 ROW_FILE = "row.json"
 LOG_FILE = "log.txt"
 FAULT_ENV = "TAICHI_CLOTH_BATCH_FAULT"
+#: the file in the kernel cache's folder that the jobs take turns on to write the cache
+CACHE_LOCK = "batch-writer.lock"
 #: the exit code of a job that its fault hook kills
 FAULT_EXIT = 70
 
@@ -127,4 +130,21 @@ def job_process(job: dict, attempt: int, faults: str = "") -> None:
     except KeyboardInterrupt:
         os._exit(130)
     write_row(folder, row)
+    save_cache()
     log.flush()
+
+
+def save_cache() -> None:
+    """Write the kernels this job compiled into the offline cache every job shares (a multiprocessing child ends
+    in os._exit, which skips the exit handler that would), one process at a time: two processes writing the cache
+    at once fight over its lock, and the loser writes nothing."""
+    if not runtime.is_initialized():
+        return
+    folder = runtime.cache_folder()
+    folder.mkdir(parents=True, exist_ok=True)
+    with open(folder / CACHE_LOCK, "a") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        try:
+            runtime.save_kernel_cache()
+        finally:
+            fcntl.flock(lock, fcntl.LOCK_UN)
