@@ -21,7 +21,7 @@
     # integrator = { cg_tolerance = 1e-3 }     # merged into the scene's [integrator]
     # rest = { max_speed = 0.005 }             # merged into the scene's [rest]
 
-    [[jobs]]                                   # optional: these jobs instead of every garment x body x material
+    [[jobs]]                                   # optional: these jobs instead of every garment x material x body
     garment = "tshirt"                         # names from the lists above
     body = "S"
     material = "cotton"
