@@ -1,4 +1,4 @@
-"""Command line: `python -m taichi_cloth run|body|flatten|bench|info|studio`."""
+"""Command line: `python -m taichi_cloth run|body|flatten|bench|info|studio|batch`."""
 from __future__ import annotations
 
 import argparse
@@ -15,6 +15,7 @@ import taichi
 from clothbase.meshes import load_triangle_mesh
 
 from . import runtime
+from .batch import cli as batch_cli
 from .body import cli as body_cli
 from .errors import BlowUpError, MeshError, PatternError, TaichiClothError
 from .flatten import flatten_pieces, format_table, plot_flat, write_flat_dxf
@@ -201,6 +202,7 @@ def main(argv=None) -> int:
     p_info = sub.add_parser("info", help="versions, integrators and their options, materials")
     p_info.set_defaults(func=_cmd_info)
     studio_cli.add_parser(sub)
+    batch_cli.add_parser(sub)
     p_bench = sub.add_parser("bench", help="benchmarks: `bench [integrators]`, `bench " + "`, `bench ".join(list(SUITES)[1:]) + "`")
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv[:1] == ["bench"]:  # a suite imports what it measures: only a bench command loads them

@@ -63,12 +63,11 @@ def init(arch: str = "cpu", parallel_from: int | None = None, **kwargs) -> None:
     kwargs.setdefault("offline_cache", True)
     kwargs.setdefault("log_level", ti.WARN)
     if kwargs["offline_cache"]:
-        clear_stale_cache_lock(Path(kwargs.get("offline_cache_file_path") or os.environ.get(
-            "TI_OFFLINE_CACHE_FILE_PATH") or Path.home() / ".cache" / "taichi" / "ticache"))
+        clear_stale_cache_lock(Path(kwargs.get("offline_cache_file_path") or cache_folder()))
     ti.init(arch=gpu_arch() if arch == "gpu" else _ARCHS[arch], **kwargs)
     _current_arch = arch
     if not _saves_cache_at_exit:
-        atexit.register(_save_kernel_cache)
+        atexit.register(save_kernel_cache)
         _saves_cache_at_exit = True
 
 
@@ -89,9 +88,16 @@ def clear_stale_cache_lock(folder: Path) -> None:
         warn(f"removed the stale kernel-cache lock {lock} ({age / 60:.0f} min old, left by a killed process)")
 
 
-def _save_kernel_cache() -> None:
-    """Finalise the Taichi runtime at exit, which writes the kernels compiled in this process to the offline cache
-    (see the module docstring)."""
+def cache_folder() -> Path:
+    """The offline kernel cache's folder when init is not given one: TI_OFFLINE_CACHE_FILE_PATH, else Taichi's
+    default."""
+    return Path(os.environ.get("TI_OFFLINE_CACHE_FILE_PATH") or Path.home() / ".cache" / "taichi" / "ticache")
+
+
+def save_kernel_cache() -> None:
+    """Finalise the Taichi runtime, which writes the kernels compiled in this process to the offline cache (see the
+    module docstring): at exit, or by a process that ends without running its exit handlers (a multiprocessing
+    child ends in os._exit: taichi_cloth.batch.worker calls it before)."""
     if is_initialized():
         try:
             ti.reset()

@@ -33,7 +33,9 @@ LAZY = ("rerun", "playwright", "warp", "pxr", "ray", "matplotlib", "trimesh", "m
         "taichi_cloth.garment.dxf",     # ezdxf
         "taichi_cloth.body",            # fit_body: scipy, for a [body] table
         "starlette", "uvicorn", "multipart",  # the pattern studio's server: the `studio` extra
-        "taichi_cloth.studio.server")   # starlette
+        "taichi_cloth.studio.server",   # starlette
+        "pyarrow",                      # the batch's results table
+        "taichi_cloth.batch.cluster")   # ray: the `cluster` extra
 
 
 def modules() -> dict[str, Path]:
