@@ -1,6 +1,9 @@
 """Bad input as a user gives it: each kind gets one `error:` line (exit 2) or one `warning:` line, never a traceback
-or a crash; Ctrl-C ends a command with one `interrupted:` line (exit 130) and keeps what was written. The CLI cases
-run `python -m taichi_cloth` (or a demo script) in a subprocess."""
+or a crash; Ctrl-C ends a command with one `interrupted:` line (exit 130) and keeps what was written. A command
+refused before any Taichi work (bad arguments, bad files, the guards that refuse before anything is allocated,
+output folders that cannot be written) runs in this process (`run_main`: taichi_cloth.cli.main, a second each
+saved); one that builds or runs a scene, or whose point is the process (Ctrl-C, a long run, the GPU fallback, a
+demo script's own exit), runs `python -m taichi_cloth` (or a demo script) in a subprocess (`cli`, `demo`)."""
 import errno
 import os
 import re
@@ -8,12 +11,14 @@ import signal
 import subprocess
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import ezdxf
 import numpy as np
 import pytest
 
+from clothbase.errors import EngineWarning
 from taichi_cloth import guards
 from taichi_cloth.errors import SceneError
 from taichi_cloth.garment.dxf import read_dxf
@@ -68,6 +73,59 @@ def demo(name, *args, timeout=300):
     noise = ("[Taichi]", "[W ", "[I ")
     return done.returncode, done.stdout, [line for line in done.stderr.splitlines()
                                           if line.strip() and not line.startswith(noise)]
+
+
+def _fresh_warning_filters() -> None:
+    """The warning filters of a fresh `python -m taichi_cloth`: Python's defaults, Taichi's deprecations and the
+    engine's warnings once (clothbase.errors); pytest's own filters would hide some of what a user sees."""
+    warnings.resetwarnings()
+    for category in (ResourceWarning, ImportWarning, PendingDeprecationWarning, DeprecationWarning):
+        warnings.simplefilter("ignore", category)
+    warnings.filterwarnings("once", category=DeprecationWarning, module="taichi")
+    warnings.filterwarnings("once", category=EngineWarning)
+
+
+@pytest.fixture
+def run_main(monkeypatch, capsys):
+    """cli() in this process, for a command refused before any Taichi work: `run_main(*args, cwd=None)` calls
+    taichi_cloth.cli.main(args) in `cwd` (default the repository, as cli) and returns cli's (exit code, stdout,
+    stderr lines). What a process would show is kept: argparse's SystemExit is its exit code (its usage and
+    `error:` lines on stderr), the warnings a fresh interpreter prints are stderr lines (`warning: ...`), an
+    uncaught exception fails the test (a process would end in a traceback). The session's Taichi runtime (ti.cpu,
+    tests/conftest.py) must survive: a command that starts Taichi on another arch fails the test instead of
+    re-initialising it (which frees every field); the cwd and runtime's parallel_from are restored after the test."""
+    from taichi_cloth import cli as cli_module
+    from taichi_cloth import runtime
+
+    init = runtime.init
+
+    def cpu_only(arch="cpu", *args, **kwargs):
+        assert arch == "cpu", f"runtime.init({arch!r}) in the test process: run this command with cli()"
+        return init(arch, *args, **kwargs)
+
+    monkeypatch.setattr(runtime, "init", cpu_only)
+    monkeypatch.setattr(runtime, "_parallel_from", runtime._parallel_from)
+
+    def call(*args, cwd=None):
+        monkeypatch.chdir(cwd or ROOT)
+        capsys.readouterr()  # what came before is not this command's
+        with warnings.catch_warnings(record=True) as caught:
+            _fresh_warning_filters()
+            try:
+                rc = cli_module.main(list(map(str, args)))
+            except SystemExit as exc:  # as the interpreter ends on it: None is 0, a message is printed and 1
+                rc = 0 if exc.code is None else exc.code if isinstance(exc.code, int) else 1
+                if exc.code is not None and not isinstance(exc.code, int):
+                    print(exc.code, file=sys.stderr)
+        captured = capsys.readouterr()
+        shown = [line for w in caught for line in
+                 ([f"warning: {w.message}"] if issubclass(w.category, EngineWarning) else
+                  warnings.formatwarning(w.message, w.category, w.filename, w.lineno, w.line).splitlines())]
+        noise = ("[Taichi]", "[W ", "[I ")
+        err = shown + [line for line in captured.err.splitlines() if line.strip() and not line.startswith(noise)]
+        return rc, captured.out, err
+
+    return call
 
 
 def one_error(rc, err, *words):
