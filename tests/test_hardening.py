@@ -1,6 +1,9 @@
 """Bad input as a user gives it: each kind gets one `error:` line (exit 2) or one `warning:` line, never a traceback
-or a crash; Ctrl-C ends a command with one `interrupted:` line (exit 130) and keeps what was written. The CLI cases
-run `python -m taichi_cloth` (or a demo script) in a subprocess."""
+or a crash; Ctrl-C ends a command with one `interrupted:` line (exit 130) and keeps what was written. A command
+refused before any Taichi work (bad arguments, bad files, the guards that refuse before anything is allocated,
+output folders that cannot be written) runs in this process (`run_main`: taichi_cloth.cli.main, a second each
+saved); one that builds or runs a scene, or whose point is the process (Ctrl-C, a long run, the GPU fallback, a
+demo script's own exit), runs `python -m taichi_cloth` (or a demo script) in a subprocess (`cli`, `demo`)."""
 import errno
 import os
 import re
@@ -8,12 +11,14 @@ import signal
 import subprocess
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import ezdxf
 import numpy as np
 import pytest
 
+from clothbase.errors import EngineWarning
 from taichi_cloth import guards
 from taichi_cloth.errors import SceneError
 from taichi_cloth.garment.dxf import read_dxf
@@ -70,6 +75,59 @@ def demo(name, *args, timeout=300):
                                           if line.strip() and not line.startswith(noise)]
 
 
+def _fresh_warning_filters() -> None:
+    """The warning filters of a fresh `python -m taichi_cloth`: Python's defaults, Taichi's deprecations and the
+    engine's warnings once (clothbase.errors); pytest's own filters would hide some of what a user sees."""
+    warnings.resetwarnings()
+    for category in (ResourceWarning, ImportWarning, PendingDeprecationWarning, DeprecationWarning):
+        warnings.simplefilter("ignore", category)
+    warnings.filterwarnings("once", category=DeprecationWarning, module="taichi")
+    warnings.filterwarnings("once", category=EngineWarning)
+
+
+@pytest.fixture
+def run_main(monkeypatch, capsys):
+    """cli() in this process, for a command refused before any Taichi work: `run_main(*args, cwd=None)` calls
+    taichi_cloth.cli.main(args) in `cwd` (default the repository, as cli) and returns cli's (exit code, stdout,
+    stderr lines). What a process would show is kept: argparse's SystemExit is its exit code (its usage and
+    `error:` lines on stderr), the warnings a fresh interpreter prints are stderr lines (`warning: ...`), an
+    uncaught exception fails the test (a process would end in a traceback). The session's Taichi runtime (ti.cpu,
+    tests/conftest.py) must survive: a command that starts Taichi on another arch fails the test instead of
+    re-initialising it (which frees every field); the cwd and runtime's parallel_from are restored after the test."""
+    from taichi_cloth import cli as cli_module
+    from taichi_cloth import runtime
+
+    init = runtime.init
+
+    def cpu_only(arch="cpu", *args, **kwargs):
+        assert arch == "cpu", f"runtime.init({arch!r}) in the test process: run this command with cli()"
+        return init(arch, *args, **kwargs)
+
+    monkeypatch.setattr(runtime, "init", cpu_only)
+    monkeypatch.setattr(runtime, "_parallel_from", runtime._parallel_from)
+
+    def call(*args, cwd=None):
+        monkeypatch.chdir(cwd or ROOT)
+        capsys.readouterr()  # what came before is not this command's
+        with warnings.catch_warnings(record=True) as caught:
+            _fresh_warning_filters()
+            try:
+                rc = cli_module.main(list(map(str, args)))
+            except SystemExit as exc:  # as the interpreter ends on it: None is 0, a message is printed and 1
+                rc = 0 if exc.code is None else exc.code if isinstance(exc.code, int) else 1
+                if exc.code is not None and not isinstance(exc.code, int):
+                    print(exc.code, file=sys.stderr)
+        captured = capsys.readouterr()
+        shown = [line for w in caught for line in
+                 ([f"warning: {w.message}"] if issubclass(w.category, EngineWarning) else
+                  warnings.formatwarning(w.message, w.category, w.filename, w.lineno, w.line).splitlines())]
+        noise = ("[Taichi]", "[W ", "[I ")
+        err = shown + [line for line in captured.err.splitlines() if line.strip() and not line.startswith(noise)]
+        return rc, captured.out, err
+
+    return call
+
+
 def one_error(rc, err, *words):
     assert rc == 2, err
     assert len(err) == 1 and err[0].startswith("error: "), err
@@ -86,8 +144,8 @@ def one_clean_error(rc, out, err, *words):
 
 # ------------------------------------------------------------------------------------------------ resources
 @pytest.mark.parametrize("res, particles", [(30000, "900,000,000"), (100000, "10,000,000,000")])
-def test_a_huge_grid_is_refused_before_anything_is_allocated(tmp_path, res, particles):
-    rc, _, err = cli("run", scene_file(tmp_path, res=res), "--no-progress")
+def test_a_huge_grid_is_refused_before_anything_is_allocated(tmp_path, res, particles, run_main):
+    rc, _, err = run_main("run", scene_file(tmp_path, res=res), "--no-progress")
     one_error(rc, err, f"[cloth.grid] resolution {res} x {res}", f"{particles} particles need about",
               "TiB of memory (estimate", "available; use a coarser resolution")
 
@@ -311,18 +369,18 @@ def test_gpu_without_a_gpu_falls_back_to_the_cpu_with_one_line(tmp_path, loader,
 
 
 # ------------------------------------------------------------------------------------------------ paths
-def test_an_output_dir_that_is_a_file_is_refused_before_the_scene_is_built(tmp_path):
+def test_an_output_dir_that_is_a_file_is_refused_before_the_scene_is_built(tmp_path, run_main):
     (tmp_path / "taken").write_text("a file")
-    rc, _, err = cli("run", scene_file(tmp_path, out=(tmp_path / "taken").as_posix()), "--no-progress")
+    rc, _, err = run_main("run", scene_file(tmp_path, out=(tmp_path / "taken").as_posix()), "--no-progress")
     one_error(rc, err, f"[output] dir '{(tmp_path / 'taken').as_posix()}' is a file, not a folder")
-    rc, _, err = cli("run", scene_file(tmp_path, out=(tmp_path / "taken" / "sub").as_posix()), "--no-progress")
+    rc, _, err = run_main("run", scene_file(tmp_path, out=(tmp_path / "taken" / "sub").as_posix()), "--no-progress")
     one_error(rc, err, f"lies below the file {tmp_path / 'taken'}")
 
 
-def test_a_scene_or_mesh_path_that_is_a_folder_is_named_as_one(tmp_path):
-    rc, out, err = cli("run", tmp_path, "--no-progress")
+def test_a_scene_or_mesh_path_that_is_a_folder_is_named_as_one(tmp_path, run_main):
+    rc, out, err = run_main("run", tmp_path, "--no-progress")
     one_clean_error(rc, out, err, f"error: {tmp_path}: is a folder, not a scene file")
-    rc, out, err = cli("flatten", tmp_path, "--out", tmp_path / "x.dxf")
+    rc, out, err = run_main("flatten", tmp_path, "--out", tmp_path / "x.dxf")
     one_clean_error(rc, out, err, f"error: {tmp_path}: is a folder, not a mesh file")
 
 
@@ -333,30 +391,32 @@ def _square(tmp_path):
     return path
 
 
-def _output_command(kind, tmp_path, out):
-    """How each kind of command is given the output folder `out`: (runner, arguments)."""
-    return {"run": (cli, ["run", scene_file(tmp_path), "--no-progress", "--out", out]),
-            "flatten": (cli, ["flatten", _square(tmp_path), "--out", out / "square.dxf"]),
-            "bench": (cli, ["bench", "--sizes", "4", "--integrators", "explicit", "--garment", "none", "--out", out]),
+def _output_command(kind, tmp_path, out, run_main):
+    """How each kind of command is given the output folder `out`: (runner, arguments). The commands run in this
+    process (run_main); the demo script in its own, as a user starts it (its exit code is the script's)."""
+    return {"run": (run_main, ["run", scene_file(tmp_path), "--no-progress", "--out", out]),
+            "flatten": (run_main, ["flatten", _square(tmp_path), "--out", out / "square.dxf"]),
+            "bench": (run_main, ["bench", "--sizes", "4", "--integrators", "explicit", "--garment", "none",
+                                 "--out", out]),
             "demo": (demo, ["hanging_cloth", "--frames", "1", "--no-progress", "--out", out])}[kind]
 
 
 @pytest.mark.parametrize("kind", ["run", "flatten", "bench", "demo"])
-def test_an_output_folder_below_a_file_is_refused_before_any_work(tmp_path, kind):
+def test_an_output_folder_below_a_file_is_refused_before_any_work(tmp_path, kind, run_main):
     (tmp_path / "notes.txt").write_text("a file")
-    runner, args = _output_command(kind, tmp_path, tmp_path / "notes.txt" / "sub")
+    runner, args = _output_command(kind, tmp_path, tmp_path / "notes.txt" / "sub", run_main)
     rc, out, err = runner(*args)
     one_clean_error(rc, out, err, f"{tmp_path / 'notes.txt' / 'sub'}", f"lies below the file {tmp_path / 'notes.txt'}")
 
 
 @pytest.mark.skipif(os.geteuid() == 0, reason="root writes into a read-only folder: chmod does not bite")
 @pytest.mark.parametrize("kind", ["run", "flatten", "bench", "demo"])
-def test_a_read_only_output_folder_is_refused_before_any_work(tmp_path, kind):
+def test_a_read_only_output_folder_is_refused_before_any_work(tmp_path, kind, run_main):
     locked = tmp_path / "locked"
     locked.mkdir()
     locked.chmod(0o555)
     try:
-        runner, args = _output_command(kind, tmp_path, locked)
+        runner, args = _output_command(kind, tmp_path, locked, run_main)
         rc, out, err = runner(*args)
     finally:
         locked.chmod(0o755)
@@ -394,17 +454,17 @@ def test_a_full_disk_is_one_line_naming_the_file(monkeypatch, capsys):
     (["--garment", "missing.toml"], "--garment missing.toml: no such scene file"),
     (["collision", "--steps", "0"], "--steps must be >= 1 (the steps replayed), got 0"),
 ])
-def test_bench_refuses_bad_arguments_before_it_starts(tmp_path, args, words):
+def test_bench_refuses_bad_arguments_before_it_starts(tmp_path, args, words, run_main):
     suite = ["collision"] if args[0] == "collision" else []
-    rc, out, err = cli("bench", *suite, *args[len(suite):], "--out", tmp_path / "bench", cwd=tmp_path)
+    rc, out, err = run_main("bench", *suite, *args[len(suite):], "--out", tmp_path / "bench", cwd=tmp_path)
     one_clean_error(rc, out, err, words)
     assert not (tmp_path / "bench").exists()  # refused before the output folder was made
 
 
 @pytest.mark.parametrize("args, words", [(["tradeoff", "--variants", "rk4"], "unknown variant 'rk4'"),
                                          (["peers", "--sizes", "2"], "--sizes: every n must be >= 4")])
-def test_every_bench_error_goes_to_stderr(tmp_path, args, words):
-    rc, out, err = cli("bench", *args, "--out", tmp_path / "bench")
+def test_every_bench_error_goes_to_stderr(tmp_path, args, words, run_main):
+    rc, out, err = run_main("bench", *args, "--out", tmp_path / "bench")
     one_clean_error(rc, out, err, words)
 
 
@@ -445,8 +505,8 @@ def test_ctrl_c_ends_a_run_with_one_line_and_keeps_its_recording(tmp_path):
 # ------------------------------------------------------------------------------------------------ messages
 @pytest.mark.parametrize("flag, value", [("--waist", "-5"), ("--waist", "0"), ("--hips", "nan"),
                                          ("--upper-arm", "inf")])
-def test_body_girth_messages_speak_in_centimetres(tmp_path, flag, value):
-    rc, _, err = cli("body", flag, value, "--out", tmp_path / "b.obj")
+def test_body_girth_messages_speak_in_centimetres(tmp_path, flag, value, run_main):
+    rc, _, err = run_main("body", flag, value, "--out", tmp_path / "b.obj")
     one_error(rc, err, f"{flag} must be a positive girth in cm, got {value}")
 
 
@@ -456,7 +516,7 @@ def test_a_pin_error_names_its_group(tmp_path):
     one_error(rc, err, "[[pins]] #2: pin box [5.0, 5.0, 5.0]..[6.0, 6.0, 6.0] contains no particle")
 
 
-def test_a_seam_corner_error_names_the_garment_file(tmp_path):
+def test_a_seam_corner_error_names_the_garment_file(tmp_path, run_main):
     garments = ROOT / "demos/garments"
     (tmp_path / "top.dxf").write_bytes((garments / "top.dxf").read_bytes())
     text = (garments / "top_dxf.toml").read_text().replace('from = "hem_L", to = "arm_L" }',
@@ -464,7 +524,7 @@ def test_a_seam_corner_error_names_the_garment_file(tmp_path):
     (tmp_path / "bad.toml").write_text(text)
     scene = (ROOT / "demos/scenes/sew_tshirt.toml").read_text().replace("../garments/tshirt.toml", "bad.toml")
     (tmp_path / "scene.toml").write_text(scene)
-    rc, _, err = cli("run", tmp_path / "scene.toml", "--no-progress", "--frames", "1")
+    rc, _, err = run_main("run", tmp_path / "scene.toml", "--no-progress", "--frames", "1")
     one_error(rc, err, "[cloth] garment bad.toml: seam 'left side': pattern piece 'front': no corner 'hem_X'")
 
 
