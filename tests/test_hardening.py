@@ -87,7 +87,8 @@ def _fresh_warning_filters() -> None:
 
 @pytest.fixture
 def run_main(monkeypatch, capsys):
-    """cli() in this process, for a command refused before any Taichi work: `run_main(*args, cwd=None)` calls
+    """cli() in this process, for a command refused before a step runs (some build the scene's fields first, which
+    the session's CPU runtime takes in its stride): `run_main(*args, cwd=None)` calls
     taichi_cloth.cli.main(args) in `cwd` (default the repository, as cli) and returns cli's (exit code, stdout,
     stderr lines). What a process would show is kept: argparse's SystemExit is its exit code (its usage and
     `error:` lines on stderr), the warnings a fresh interpreter prints are stderr lines (`warning: ...`), an
@@ -211,9 +212,9 @@ def test_a_self_collision_cell_size_the_machine_cannot_hold_is_refused_before_th
     tc.Scene(sheet, self_collision={"cell_size": 0.03})
 
 
-def test_a_tiny_step_is_refused_with_its_count_and_time(tmp_path):
+def test_a_tiny_step_is_refused_with_its_count_and_time(run_main, tmp_path):
     path = scene_file(tmp_path, dt=1e-12, frames=2)
-    rc, _, err = cli("run", path, "--no-progress")
+    rc, _, err = run_main("run", path, "--no-progress")
     one_error(rc, err, "the run is too long: 2 frames of 16,666,650,000 steps (dt = 1e-12 s) = 33,333,300,000 steps",
               "on this CPU (estimate)", "more than 10,000,000 steps needs --yes")
 
@@ -234,11 +235,11 @@ def test_a_long_run_is_announced_and_runs_with_yes(tmp_path):
     assert line.startswith("this run takes 20 frames of 1,666,665 steps (dt = 1e-08 s) = 33,333,300 steps, about ")
 
 
-def test_an_automatic_step_is_counted_too(tmp_path):
+def test_an_automatic_step_is_counted_too(run_main, tmp_path):
     """dt = "auto" (here from --quality accurate: central differences at 0.9 x the stable step) was skipped by the
     run-length guard: a stiff fine scene ran for hours unannounced. Its steps now come from the clock's own rule."""
     stiff = 'material = { preset = "cotton", stretch = 1e6, shear = 1e6 }'
-    rc, _, err = cli("run", scene_file(tmp_path, res=32, frames=1000, material=stiff), "--no-progress",
+    rc, _, err = run_main("run", scene_file(tmp_path, res=32, frames=1000, material=stiff), "--no-progress",
                      "--quality", "accurate")
     one_error(rc, err, "the run is too long: 1000 frames of 10,617 steps (dt = auto: 1.57e-06 s, 0.9 x the stable "
                        "step 1.74e-06 s) = 10,617,000 steps at least, about ", "needs --yes")
@@ -285,9 +286,9 @@ def test_the_implicit_cost_per_particle_grows_with_the_cg_iterations():
 STIFF = 'material = { preset = "cotton", stretch = 1e14, shear = 1e14 }'
 
 
-def test_f32_refuses_a_stiffness_it_cannot_resolve(tmp_path):
+def test_f32_refuses_a_stiffness_it_cannot_resolve(run_main, tmp_path):
     path = scene_file(tmp_path, res=8, integrator="implicit", dt=0.016666667, material=STIFF)
-    rc, _, err = cli("run", path, "--no-progress")
+    rc, _, err = run_main("run", path, "--no-progress")
     one_error(rc, err, "f32 cannot resolve this step: h^2 k / m = ", "exceeds 8.39e+05 = 0.1 / f32 epsilon",
               'use precision = "f64" (--precision f64)')
 
@@ -332,10 +333,10 @@ def test_an_open_collider_mesh_warns_that_it_is_one_sided(tmp_path):
     ("pattern.dxf", (ROOT / "demos/garments/top.dxf").read_bytes(), "unreadable as a mesh: a DXF file holds 2D "
                                                                      "pattern outlines, not triangles"),
 ])
-def test_an_unreadable_mesh_file_is_reported_as_unreadable(tmp_path, name, content, words):
+def test_an_unreadable_mesh_file_is_reported_as_unreadable(run_main, tmp_path, name, content, words):
     (tmp_path / name).write_bytes(content)
     path = scene_file(tmp_path, extra=COLLIDER.format(path=name))
-    rc, _, err = cli("run", path, "--no-progress")
+    rc, _, err = run_main("run", path, "--no-progress")
     line = one_error(rc, err, str(tmp_path / name), words)
     assert "charset_normalizer" not in line and "reshape" not in line
 
@@ -510,9 +511,9 @@ def test_body_girth_messages_speak_in_centimetres(tmp_path, flag, value, run_mai
     one_error(rc, err, f"{flag} must be a positive girth in cm, got {value}")
 
 
-def test_a_pin_error_names_its_group(tmp_path):
+def test_a_pin_error_names_its_group(run_main, tmp_path):
     extra = "\n[[pins]]\nindices = [0]\n[[pins]]\nbox = { min = [5.0, 5.0, 5.0], max = [6.0, 6.0, 6.0] }\n"
-    rc, _, err = cli("run", scene_file(tmp_path, extra=extra), "--no-progress")
+    rc, _, err = run_main("run", scene_file(tmp_path, extra=extra), "--no-progress")
     one_error(rc, err, "[[pins]] #2: pin box [5.0, 5.0, 5.0]..[6.0, 6.0, 6.0] contains no particle")
 
 
