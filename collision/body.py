@@ -36,7 +36,7 @@ class MeshCollider(ParticleCollider):
 
     vertices (V,3) [m] and triangles (T,3) with outward-facing winding; thickness [m]: the cloth keeps this
     distance from the surface; friction: Coulomb coefficient; cell_size [m]: voxel edge (default 1.5 x the
-    mean edge length); max_step [m]: the largest particle motion per step the grid margin allows for; mode:
+    mean edge length, 2 x for a deforming body); max_step [m]: the largest particle motion per step the grid margin allows for; mode:
     "fuzzy" or "exact"; max_candidates: per-particle candidate list length (a particle with more has its cells
     scanned unranked instead, and counted as overflows); passes: detection passes per step (a particle moved
     out of a crossing is checked again); reach_gate: also give mu = 0 to faces whose plane the motion cannot reach this step (off:
@@ -86,7 +86,9 @@ class MeshCollider(ParticleCollider):
         self.triangles_np = t
         edges = np.linalg.norm(v[t] - v[t[:, [1, 2, 0]]], axis=2)
         self.mean_edge = float(edges.mean())
-        self.cell_size = float(cell_size) if cell_size else 1.5 * self.mean_edge
+        # a deforming body refills its grid as it moves: larger cells (fewer to scan and fill) pay for the few more
+        # candidates they hold (the mannequin's clip: 1.3 instead of 2.0 ms a step posing, 1.4 instead of 1.3 colliding)
+        self.cell_size = float(cell_size) if cell_size else (2.0 if sequence is not None else 1.5) * self.mean_edge
         blk = FieldBlock()
         self.vertices = blk.vector(3, ti.f32, len(v))
         self.triangles = blk.vector(3, ti.i32, len(t))

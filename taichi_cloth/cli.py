@@ -66,11 +66,12 @@ def _step(text: str):
         raise argparse.ArgumentTypeError(f'must be a number of seconds or "auto", got {text!r}') from None
 
 
-def run_scene_file(scene_path, args, quiet: bool = False):
+def run_scene_file(scene_path, args, quiet: bool = False, base_dir=None):
     """`python -m taichi_cloth run` and the scene demos: taichi_cloth.run.run_scene_file (load with the CLI
     overrides in `args`, run, record to OUT/NAME.rrd, export the final mesh beside it), then the line that opens
-    the recording. Returns (summary, loaded scene)."""
-    summary, loaded = run_and_record(scene_path, args, quiet)
+    the recording. scene_path: a file, or a scene as a dict whose relative paths start at base_dir. Returns
+    (summary, loaded scene)."""
+    summary, loaded = run_and_record(scene_path, args, quiet, base_dir)
     if loaded.output["record"] and not quiet:
         print(f"open the recording with:  {rerun_command()} {summary.outputs[0]}")
     return summary, loaded
