@@ -186,6 +186,20 @@ def write_triangle_mesh(path: str | Path, vertices: np.ndarray, triangles: np.nd
     return path
 
 
+def read_mesh_arrays(path) -> tuple[np.ndarray, np.ndarray]:
+    """(vertices (V,3) float64, triangles (T,3) int64) of a mesh file as written (trimesh, nothing merged or
+    checked); MeshError naming the file when trimesh cannot read it."""
+    import trimesh  # 0.7 s to import: only when a mesh file is read
+
+    try:
+        mesh = trimesh.load(path, force="mesh", process=False)
+        v = np.asarray(mesh.vertices, dtype=np.float64).reshape(-1, 3)
+        t = np.asarray(mesh.faces, dtype=np.int64).reshape(-1, 3)
+    except Exception as exc:  # trimesh raises many types for unreadable files
+        raise MeshError(f"{path}: unreadable as a mesh ({type(exc).__name__}: {exc})") from None
+    return v, t
+
+
 def load_triangle_mesh(path: str | Path, scale: float = 1.0, translate=(0.0, 0.0, 0.0), repair: bool = False):
     """Read a triangle mesh (OBJ, STL, PLY, GLB, OFF...) with trimesh; returns (vertices (V,3) float64 [m],
     triangles (T,3) int64). `scale` multiplies the file's coordinates into metres, then `translate` [m] is
@@ -200,12 +214,7 @@ def load_triangle_mesh(path: str | Path, scale: float = 1.0, translate=(0.0, 0.0
     if path.suffix.lower() == ".dxf":
         raise MeshError(f"{path}: unreadable as a mesh: a DXF file holds 2D pattern outlines, not triangles (a "
                         "garment file reads them: dxf = \"pattern.dxf\")")
-    try:
-        mesh = trimesh.load(path, force="mesh", process=False)
-        v = np.asarray(mesh.vertices, dtype=np.float64).reshape(-1, 3)
-        t = np.asarray(mesh.faces, dtype=np.int64).reshape(-1, 3)
-    except Exception as exc:  # trimesh raises many types for unreadable files
-        raise MeshError(f"{path}: unreadable as a mesh ({type(exc).__name__}: {exc})") from None
+    v, t = read_mesh_arrays(path)
     if len(v) == 0 or len(t) == 0:
         raise MeshError(f"{path}: unreadable as a mesh: no {'vertices' if len(v) == 0 else 'triangles'} found in "
                         "it (is it a mesh file? OBJ, STL, PLY, OFF, GLB)")

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import MeshError
-from .meshes import validate_triangle_mesh
+from .meshes import read_mesh_arrays, validate_triangle_mesh
 
 __all__ = ["MeshSequence", "load_mesh_sequence", "save_mesh_sequence", "FRAME_SUFFIXES"]
 
@@ -94,19 +94,12 @@ def _merge_coincident(frames: np.ndarray, triangles: np.ndarray) -> tuple[np.nda
 
 
 def _read_frames(folder: Path) -> tuple[np.ndarray, np.ndarray]:
-    import trimesh  # only when a folder of frames is read
-
     files = sorted((p for p in folder.iterdir() if p.suffix.lower() in FRAME_SUFFIXES), key=_frame_number)
     if not files:
         raise MeshError(f"{folder}: no OBJ or PLY frames in this folder")
     frames, triangles = [], None
     for p in files:
-        try:
-            mesh = trimesh.load(p, force="mesh", process=False)
-            v = np.asarray(mesh.vertices, dtype=np.float64).reshape(-1, 3)
-            t = np.asarray(mesh.faces, dtype=np.int64).reshape(-1, 3)
-        except Exception as exc:  # trimesh raises many types for unreadable files
-            raise MeshError(f"{p}: unreadable as a mesh ({type(exc).__name__}: {exc})") from None
+        v, t = read_mesh_arrays(p)
         if triangles is None:
             triangles = t
         elif len(v) != len(frames[0]) or not np.array_equal(t, triangles):

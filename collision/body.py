@@ -243,13 +243,11 @@ class MeshCollider(ParticleCollider):
         measurement (its one read)."""
         return 1 if self.deforming else 0
 
-    @ti.kernel
-    def report(self, out: ti.template(), offset: ti.i32):
-        out[offset] = ti.cast(self.grid.needed[None], ti.f64)
-        self.grid.needed[None] = 0
+    def report(self, out, offset: int) -> None:
+        self.grid.report(out, offset)
 
     def reported(self, values) -> None:
-        self.grid.check_capacity(int(values[0]))
+        self.grid.reported(values)
 
     def reset_counters(self) -> None:
         self.counters.fill(0)

@@ -114,6 +114,17 @@ class VoxelGrid:
         if not self.serial:
             self._sort_cells()
 
+    @ti.kernel
+    def report(self, out: ti.template(), offset: ti.i32):
+        """Put the most (triangle, cell) pairs a rebuild asked for since the last report in out[offset] (the frame's
+        one read), and count afresh."""
+        out[offset] = ti.cast(self.needed[None], ti.f64)
+        self.needed[None] = 0
+
+    def reported(self, values) -> None:
+        """The frame's read is back: values[0] is what report put there."""
+        self.check_capacity(int(values[0]))
+
     def check_capacity(self, needed: int) -> None:
         """Raise if a rebuild asked for more (triangle, cell) pairs than the grid holds."""
         if needed > self.pair_capacity:

@@ -302,13 +302,11 @@ class SelfCollision(ParticleCollider):
     # ------------------------------------------------------------------ reported with the frame's measurement
     report_slots = 1  # the most (triangle, cell) pairs a grid rebuild asked for since the last frame
 
-    @ti.kernel
-    def report(self, out: ti.template(), offset: ti.i32):
-        out[offset] = ti.cast(self.grid.needed[None], ti.f64)
-        self.grid.needed[None] = 0
+    def report(self, out, offset: int) -> None:
+        self.grid.report(out, offset)
 
     def reported(self, values) -> None:
-        self.grid.check_capacity(int(values[0]))
+        self.grid.reported(values)
 
     def counter_values(self) -> dict:
         names = ("candidates", "edge candidates", "point-triangle contacts", "edge-edge contacts",

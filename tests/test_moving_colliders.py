@@ -75,6 +75,18 @@ def test_a_turntable_carries_the_sheet_resting_on_it(integrator="implicit"):
     assert np.abs(rest - turned).max() > 0.2  # what a table that does not carry it would leave
 
 
+def sweep(sc, ball, until: float) -> tuple[float, float]:
+    """Step `sc` until `until` [s]; (the smallest signed distance [m] of any particle to `ball` after any step, the
+    farthest any particle got along z [m])."""
+    deepest, reach = np.inf, 0.0
+    while sc.state.t < until:
+        sc.advance(1)
+        x = sc.positions()
+        deepest = min(deepest, ball.signed_distance(x).min())
+        reach = max(reach, x[:, 2].max())
+    return deepest, reach
+
+
 @pytest.mark.parametrize("speed, dt", [(2.0, 1 / 60), (5.0, "auto")], ids=["2 m/s at 1/60 s", "5 m/s, dt auto"])
 def test_no_particle_is_ever_inside_a_fast_sphere(speed, dt):
     """A 0.15 m sphere moving through a hanging 1 m sheet (32 x 32) at 2 m/s with 1/60 s steps, and at 5 m/s with
@@ -86,12 +98,7 @@ def test_no_particle_is_ever_inside_a_fast_sphere(speed, dt):
     sc = tc.Scene(cloth, integrator="implicit", dt=dt, pins=[{"near": [(-0.5, 1.5, 0), (0.5, 1.5, 0)]}],
                   colliders=[sphere])
     ball = sc.controller("colliders").objects[0]
-    deepest, reach = np.inf, 0.0
-    while sc.state.t < 1.0 / speed + 0.1:
-        sc.advance(1)
-        x = sc.positions()
-        deepest = min(deepest, ball.signed_distance(x).min())
-        reach = max(reach, x[:, 2].max())
+    deepest, reach = sweep(sc, ball, 1.0 / speed + 0.1)
     assert deepest > 0.003 - 1e-4  # the thickness, less float32 round-off
     assert reach > 0.3  # carried forward by the sphere (its front ends at z = 0.65)
     sc.reset()  # back where it started
@@ -199,12 +206,7 @@ def test_no_particle_is_ever_inside_a_fast_growing_deforming_ball():
                   colliders=[{"type": "mesh", "sequence": ball_sequence(speed, radius=(0.12, 0.15))}])
     collide = sc.controller("colliders")
     ball = collide.objects[0]
-    deepest, reach = np.inf, 0.0
-    while sc.state.t < 1.0 / speed + 0.1:
-        sc.advance(1)
-        x = sc.positions()
-        deepest = min(deepest, ball.signed_distance(x).min())
-        reach = max(reach, x[:, 2].max())
+    deepest, reach = sweep(sc, ball, 1.0 / speed + 0.1)
     assert deepest > 0.003 - 1e-4  # the thickness, less float32 round-off
     assert reach > 0.3
     np.testing.assert_allclose(ball.vertices.to_numpy(), ball.sequence.frames[-1], rtol=0, atol=1e-6)
