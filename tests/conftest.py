@@ -16,7 +16,7 @@ os.environ.setdefault("TI_ADVANCED_OPTIMIZATION", "0")
 #: the longest test files, longest first (about, on the 2-core machine): `make test` gives each file to one of two
 #: workers, in the order collected; a long file handed out last keeps one worker busy while the other waits, so
 #: these go first and the short ones fill in at the end
-LONGEST_FIRST = ("test_demo_scenes.py", "test_collision.py", "test_implicit_multigrid.py",
+LONGEST_FIRST = ("test_collision.py", "test_demo_garments.py", "test_demo_scenes.py", "test_implicit_multigrid.py",
                  "test_self_collision_stress.py", "test_multilevel.py", "test_moving_colliders.py",
                  "test_self_collision.py", "test_hardening.py", "test_body_scene.py", "test_rest.py",
                  "test_multilevel_garment.py", "test_aggregation_rigid.py", "test_determinism.py", "test_host_reads.py",

@@ -87,11 +87,11 @@ def sweep(sc, ball, until: float) -> tuple[float, float]:
     return deepest, reach
 
 
-@pytest.mark.parametrize("speed, dt", [(2.0, 1 / 60), (5.0, "auto")], ids=["2 m/s at 1/60 s", "5 m/s, dt auto"])
-def test_no_particle_is_ever_inside_a_fast_sphere(speed, dt):
-    """A 0.15 m sphere moving through a hanging 1 m sheet (32 x 32) at 2 m/s with 1/60 s steps, and at 5 m/s with
-    the steps the engine chooses: at every step every particle is outside the sphere (exact distance, at least the
-    collider's thickness less round-off), and the sheet was carried forward (it wraps the sphere)."""
+def test_no_particle_is_ever_inside_a_fast_sphere(speed=5.0, dt="auto"):
+    """A 0.15 m sphere moving through a hanging 1 m sheet (32 x 32) at 5 m/s with the steps the engine chooses (at 2
+    m/s with 1/60 s steps: the deforming ball below, which also grows): at every step every particle is outside the
+    sphere (exact distance, at least the collider's thickness less round-off), and the sheet was carried forward (it
+    wraps the sphere). 2 m/s with 1/60 s steps passed the same (measured 2026-11-27), and runs as a mesh below."""
     cloth = tc.ClothBuilder.grid((1.0, 1.0), (32, 32), "cotton", center=(0, 1.0, 0), plane="xy")
     sphere = {"type": "sphere", "center": [0, 1.0, -0.5], "radius": 0.15,
               "keyframes": [[0.0, 0, 0, 0], [1.0 / speed, 0, 0, 1.0]]}
