@@ -142,7 +142,7 @@ class Colliders(Controller):
         self.objects, self.state, self.contacts = list(objects), state, contacts
         # a deforming body is drawn anew every frame
         self.moving: set[int] = {k for k, c in enumerate(self.objects) if getattr(c, "deforming", False)}
-        self._drawn: dict[int, float] = {}  # a deforming body: the time of its pose last recorded
+        self._drawn: dict[int, tuple] = {}  # a deforming body: its (frame, weight) last recorded
         for c in self.objects:
             c.attach(state.x, state.v, model.inv_mass, model.n_particles, contacts.normal, model.serial,
                      contacts.friction, contacts.before, contacts.velocity)
