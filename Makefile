@@ -27,13 +27,16 @@ test: $(VENV)/.installed
 bench: $(VENV)/.installed
 	$(PY) -m taichi_cloth bench --out $(OUT)/bench
 
+# Debian's Chromium, installed when missing (sudo unless root): view-check and studio-check drive it
+NEED_CHROMIUM = command -v chromium >/dev/null 2>&1 || { $$(test "$$(id -u)" = 0 || echo sudo) apt-get update -qq && \
+	$$(test "$$(id -u)" = 0 || echo sudo) apt-get install -y -qq chromium; }
+
 $(VENV)/.view: $(VENV)/.installed
 	$(PY) -m pip install --quiet -e '.[view]'
 	touch $@
 
 view-check: $(VENV)/.view
-	command -v chromium >/dev/null 2>&1 || { $$(test "$$(id -u)" = 0 || echo sudo) apt-get update -qq && \
-		$$(test "$$(id -u)" = 0 || echo sudo) apt-get install -y -qq chromium; }
+	$(NEED_CHROMIUM)
 	$(PY) -m taichi_cloth.view_check --out $(OUT)/view --shots docs
 
 # the pattern studio on the T-shirt's DXF (STUDIO_FILE=another file in demos/garments, or none): installs the
@@ -53,8 +56,7 @@ $(VENV)/.studio: $(VENV)/.installed
 	touch $@
 
 studio-check: $(VENV)/.studio
-	command -v chromium >/dev/null 2>&1 || { $$(test "$$(id -u)" = 0 || echo sudo) apt-get update -qq && \
-		$$(test "$$(id -u)" = 0 || echo sudo) apt-get install -y -qq chromium; }
+	$(NEED_CHROMIUM)
 	STUDIO_SHOTS=docs $(PY) -m pytest -m browser -p no:xdist tests/test_studio_browser.py
 
 clean:
