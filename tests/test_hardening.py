@@ -453,6 +453,9 @@ def test_a_full_disk_is_one_line_naming_the_file(monkeypatch, capsys):
     (["--sizes", "32", "1"], "--sizes: every n must be >= 4 (n x n particles), got 32 1"),
     (["--material", "wool"], "--material: unknown material 'wool'; choose from silk, cotton"),
     (["--garment", "missing.toml"], "--garment missing.toml: no such scene file"),
+    # no implicit row would time the garment: the file named is still checked (issue 48: this ran silently)
+    (["--sizes", "8", "--integrators", "explicit", "--garment", "missing.toml"],
+     "--garment missing.toml: no such scene file"),
     (["collision", "--steps", "0"], "--steps must be >= 1 (the steps replayed), got 0"),
 ])
 def test_bench_refuses_bad_arguments_before_it_starts(tmp_path, args, words, run_main):
