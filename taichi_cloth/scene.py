@@ -1,11 +1,10 @@
 """Scene: the only time loop. It holds a model, a state, an integrator, a step clock and the controllers the scene
 names (taichi_cloth.control), and knows none of them by name.
 
-Per step (Scene.substep): every controller's before_step, the collision stage's begin, the integrator's
-step(state, contacts, dt), every controller's after_step, then the collision stage (taichi_cloth.colliders), which
-pushes the particles out and writes the contacts the next step reads. Per frame: the clock plans the frame's steps,
-one measurement and blow-up check (taichi_cloth.blowup), every controller's after_frame, whose model changes are
-applied in one place (Scene.apply), and, when recording, one snapshot for the recorder (taichi_cloth.runlog).
+Per step: the integrator's step with the controllers' step hooks and the collision stage around it, fused where
+it can be (taichi_cloth.stepping). Per frame: the clock plans the frame's steps, one measurement and blow-up check
+(taichi_cloth.blowup), every controller's after_frame, whose model changes are applied in one place (Scene.apply),
+and, when recording, one snapshot for the recorder (taichi_cloth.runlog).
 """
 from __future__ import annotations
 
@@ -26,6 +25,7 @@ from .normals import VertexNormals
 from .runlog import FrameLog, close_summary, open_summary
 from .self_intersection import IntersectionCount
 from .stability import stable_dt
+from .stepping import Stepper
 from .summary import RunSummary
 
 __all__ = ["RunSummary", "Scene"]
@@ -42,7 +42,8 @@ class Scene:
 
     model, state, forces, integrator, clock: the parts; contacts: what the collision stage (`collision`, a
     Colliders) writes and the integrator reads (both None without colliders); controllers: the features, in the
-    order their hooks run (Scene.controller(name) finds one); warnings: lines for the summary.
+    order their hooks run (Scene.controller(name) finds one); warnings: lines for the summary; fused: whether a
+    frame's steps run fused (taichi_cloth.stepping.Stepper).
     """
 
     def __init__(self, cloth, **options):
@@ -65,17 +66,11 @@ class Scene:
         self._bind_hooks()
 
     def _bind_hooks(self) -> None:
-        # the loop calls only the hooks a controller implements (step hooks only where they have work)
-        hooks = lambda name, cs: [getattr(c, name) for c in cs if overrides(c, name)]  # noqa: E731
-        stepping = [c for c in self.controllers if c.per_step]
-        self._before_step, self._after_step = hooks("before_step", stepping), hooks("after_step", stepping)
-        self._after_frame = hooks("after_frame", self.controllers)
-        self._model_changed = hooks("model_changed", self.controllers)
-        # fused: the integrator runs a frame's steps in few kernel launches (nothing between them needs the host)
-        inline = [c.inline_step() for c in stepping if overrides(c, "before_step") or overrides(c, "after_step")]
-        if self.collision is not None:
-            inline.append(self.collision.inline_step())
-        self.fused = all(x is not None for x in inline) and self.integrator.fuse(tuple(o for x in inline for o in x))
+        # the loop calls only the hooks a controller implements
+        self._after_frame = [c.after_frame for c in self.controllers if overrides(c, "after_frame")]
+        self._model_changed = [c.model_changed for c in self.controllers if overrides(c, "model_changed")]
+        self._stepper = Stepper(self.integrator, self.state, self.contacts, self.collision, self.controllers)
+        self.fused = self._stepper.fused
 
     def add_controller(self, controller) -> None:
         """Add a controller of your own (a taichi_cloth.control.Controller): its hooks run after the scene's own."""
@@ -112,32 +107,13 @@ class Scene:
 
     def advance(self, n: int = 1, dt: float | None = None) -> None:
         """n steps of dt [s] (default: the current dt), without the per-frame measurement and blow-up check."""
-        dt = self.clock.dt if dt is None else dt
-        if self.fused:
-            self.integrator.advance_fused(self.state, self.contacts, n, dt)
-            self.steps_taken += n
-            return
-        for _ in range(n):
-            self.substep(dt)
+        self._stepper.advance(n, self.clock.dt if dt is None else dt)
+        self.steps_taken += n
 
     def substep(self, dt: float, observe=None) -> None:
-        """One step of dt [s] as a run takes it, unfused: the controllers' before_step, the collision stage's begin,
-        the integrator's step(state, contacts, dt), the controllers' after_step, the collision stage. observe: a
-        callable of no argument, called right after the integrator's step (what the integrator alone did)."""
-        state, contacts, collision = self.state, self.contacts, self.collision
-        for hook in self._before_step:
-            hook(state.t, dt)
-        if collision is not None:
-            # speculative contacts for the long steps of the implicit integrators (an explicit step's push is short,
-            # and its fused steps resolve inline)
-            collision.begin(state, contacts, dt if type(self.integrator).unconditionally_stable else None)
-        self.integrator.step(state, contacts, dt)
-        if observe is not None:
-            observe()
-        for hook in self._after_step:
-            hook(state.t, dt)
-        if collision is not None:
-            collision.collide(state, contacts, dt)
+        """One step of dt [s] as a run takes it, unfused (taichi_cloth.stepping.Stepper.step). observe: a callable of
+        no argument, called right after the integrator's step (what the integrator alone did)."""
+        self._stepper.step(dt, observe)
         self.steps_taken += 1
 
     def step(self, n: int = 1) -> Measurement:
