@@ -1,10 +1,38 @@
 """The self-collision guarantee under stress (benchmarks/self_collision_stress.py at the sizes the tests use), counted
 exactly at every frame: a ribbon piling on the floor, a towel folded three times by pins, a sheet twisted by its
-pinned edges, and a hanging sheet whose corners are jerked sideways."""
+pinned edges, and a hanging sheet whose corners are jerked sideways.
+
+A pile or a fold is chaotic: its exact outcome follows the last bits of its start (docs/performance.md, "Keeping clear
+of chaos"). The guarantee holds at every frame (no crossing, no unresolved pair); whether a stray impact zone falls
+in the last second does not, so the tests bound the share of the last second's steps that made one, well under the
+every-step of a fold that locks."""
+import collision.self_collision as self_collision
 import pytest
 
 from benchmarks.self_collision_stress import (crossings_per_frame, jerked_sheet, ribbon_pile, towel_folded_three_times,
                                              twisted_sheet)
+
+
+#: the largest share of the last second's steps in which impact zones may hold a cloth said not to be held. A fold
+#: that cannot open makes zones in every step (the jerked sheet at its fixed step below: 100 %); the stress scenes,
+#: each run from its start and from 3 starts moved by 1e-7 m (taichi_cloth.perturb), made them in at most 2 of the
+#: last 60 steps (the towel from one moved start; the others none), and the ribbon in 4 zones, so at most 4 steps,
+#: on another CPU: 25 % is over 3 times the worst seen
+HELD_SHARE = 0.25
+
+
+def held_steps_in_last(obj, seconds: float) -> tuple[int, int]:
+    """(steps that made an impact zone, steps) over the last `seconds` [s] of steps of SelfCollision `obj`, read from
+    the ring that zones_in_last sums."""
+    steps, log = int(obj.zone_steps[None]), obj.zone_log.to_numpy()
+    held = n = 0
+    span = 0.0
+    for k in range(steps - 1, max(steps - self_collision.RECENT_STEPS, 0) - 1, -1):
+        if span >= seconds:
+            break
+        dt, zones = log[k % self_collision.RECENT_STEPS]
+        held, n, span = held + int(zones > 0), n + 1, span + dt
+    return held, n
 
 
 @pytest.mark.parametrize("build, frames, step", [(ribbon_pile, 90, "fixed"), (towel_folded_three_times, 240, "fixed"),
@@ -14,8 +42,10 @@ def test_the_cloth_never_crosses_itself_at_any_frame(build, frames, step):
     """The small stress scenes (benchmarks/self_collision_stress.py): without self-collision the cloth passes
     through itself (the ribbon within 30 frames, the towel by its second fold, the twisted sheet at 1.27 s); with it,
     no two triangles intersect at any of the frames (1.5 s of the ribbon, 4 s of the towel, the twist's first 1.5 s at
-    the adaptive step), the continuous stage left no pair unresolved, and no impact zone holds the cloth in the last
-    second."""
+    the adaptive step), the continuous stage left no pair unresolved, and impact zones do not hold the cloth at its end:
+    they were made in at most a quarter of the last second's steps (HELD_SHARE; a locked fold makes them in every
+    step). Which steps make a stray zone is chaotic: the towel from a start moved by 1e-7 m made 3 zones in its last
+    second, the ribbon 4 on another CPU, where the unmoved starts here make none."""
     without, _ = build(False, small=True, step=step)
     assert crossings_per_frame(without, frames, stop_at_first=True)[-1] > 0
     scene, n = build(True, small=True, step=step)
@@ -23,7 +53,8 @@ def test_the_cloth_never_crosses_itself_at_any_frame(build, frames, step):
     assert max(crossings_per_frame(scene, frames)) == 0
     obj = scene.controller("colliders").self_collision
     assert obj.counter_values()["unresolved pairs"] == 0
-    assert obj.zones_in_last(1.0) == 0  # nothing held at the end
+    held, steps = held_steps_in_last(obj, 1.0)
+    assert steps >= 60 and held <= HELD_SHARE * steps, (held, steps)  # nothing held at the end
 
 
 def test_a_run_still_held_by_impact_zones_at_its_end_says_so():
