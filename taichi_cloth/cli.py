@@ -54,6 +54,10 @@ def add_run_arguments(p: argparse.ArgumentParser, frames_default=None) -> None:
     p.add_argument("--until-rest", action="store_true",
                    help="end the run at the first frame at which the cloth is at rest (the scene's [rest] criterion; "
                         "--frames is then the most it runs)")
+    p.add_argument("--perturb", type=float, metavar="METRES",
+                   help="move every free particle of the start by METRES in a random direction before the run "
+                        "(1e-7: float32's round-off on a metre), to tell what a result owes to one trajectory")
+    p.add_argument("--seed", type=int, metavar="N", help="the random directions of --perturb (default 0)")
 
 
 def _step(text: str):

@@ -4,19 +4,23 @@
 `run_scene_file` does that, runs it, records it to OUT/NAME.rrd, exports the final mesh beside it and prints the
 summary (taichi_cloth.cli.run_scene_file, which the demos call, adds the line that opens the recording). Both read
 their overrides from an argparse.Namespace made by `taichi_cloth.cli.add_run_arguments` (out, frames, integrator,
-dt, arch, precision, quality, resolution, no_progress, yes, png, until_rest); an attribute it lacks counts as not given.
+dt, arch, precision, quality, resolution, no_progress, yes, png, until_rest, perturb, seed); an attribute it lacks
+counts as not given.
 """
 from __future__ import annotations
 
 import argparse
+import math
 from pathlib import Path
 
 from . import runtime
-from .errors import BlowUpError
+from .control import ModelChange
+from .errors import BlowUpError, SceneError
 from .garment.metrics import garment_quality
 from .guards import check_run_length
 from .paths import free_stem
 from .pattern_view import log_scene_pattern
+from .perturb import perturb_start
 from .scenefile import LoadedScene, load_scene, parse_scene
 from .still import write_pictures
 from .summary import RunSummary
@@ -25,10 +29,12 @@ from .summary import RunSummary
 def load_scene_file(source: str | Path | dict, args: argparse.Namespace,
                     base_dir: str | Path | None = None) -> LoadedScene:
     """Load `source` (a TOML path, or a scene dict whose relative paths are read from `base_dir`) with the
-    overrides in `args`; --until-rest makes the scene's runs end at rest. Starts Taichi on args.arch (default
+    overrides in `args`; --until-rest makes the scene's runs end at rest; --perturb moves its start
+    (taichi_cloth.perturb.perturb_start, with --seed), an event of the run. Starts Taichi on args.arch (default
     "cpu") once the file has parsed, so a bad file fails before Taichi starts. Raises SceneError for bad input
     and for a run longer than the step guard allows without --yes."""
     parse_scene(source, Path(base_dir) if base_dir is not None else None)
+    perturb, seed = _perturbation(args)
     runtime.init(getattr(args, "arch", None) or "cpu")
     loaded = load_scene(source, frames=getattr(args, "frames", None), integrator=getattr(args, "integrator", None),
                         dt=getattr(args, "dt", None), precision=getattr(args, "precision", None),
@@ -38,7 +44,23 @@ def load_scene_file(source: str | Path | dict, args: argparse.Namespace,
         loaded.scene.stop_at_rest = True
     check_run_length(loaded.scene, loaded.frames, confirmed=getattr(args, "yes", False),
                      label=str(loaded.config["_label"]))
+    if perturb is not None:
+        perturb_start(loaded.scene, perturb, seed)
+        loaded.scene.apply(ModelChange(event=f"start moved by {perturb:g} m (seed {seed})"))  # in the summary
     return loaded
+
+
+def _perturbation(args: argparse.Namespace) -> tuple[float | None, int]:
+    """(--perturb [m] or None, --seed); SceneError for a distance that is negative or not finite, or a seed
+    without a perturbation (it would be ignored)."""
+    perturb, seed = getattr(args, "perturb", None), getattr(args, "seed", None)
+    if perturb is None:
+        if seed is not None:
+            raise SceneError(f"--seed {seed}: nothing to seed without --perturb METRES")
+        return None, 0
+    if not math.isfinite(perturb) or perturb < 0:
+        raise SceneError(f"--perturb must be a distance >= 0 m, got {perturb}")
+    return float(perturb), 0 if seed is None else int(seed)
 
 
 def run_scene_file(source: str | Path | dict, args: argparse.Namespace, quiet: bool = False,

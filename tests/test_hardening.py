@@ -472,6 +472,22 @@ def test_every_bench_error_goes_to_stderr(tmp_path, args, words, run_main):
     one_clean_error(rc, out, err, words)
 
 
+# ------------------------------------------------------------------------------------------------ perturbed starts
+@pytest.mark.parametrize("flags, words", [
+    (["--perturb=-0.001"], "--perturb must be a distance >= 0 m, got -0.001"),
+    (["--perturb", "nan"], "--perturb must be a distance >= 0 m, got nan"),
+    (["--perturb", "inf", "--seed", "1"], "--perturb must be a distance >= 0 m, got inf"),
+    (["--seed", "2"], "--seed 2: nothing to seed without --perturb METRES"),
+])
+def test_a_perturbation_that_is_no_distance_is_refused_before_taichi_starts(tmp_path, flags, words, run_main,
+                                                                           monkeypatch):
+    from taichi_cloth import runtime
+
+    monkeypatch.setattr(runtime, "init", lambda *args, **kwargs: pytest.fail("Taichi started before the refusal"))
+    rc, out, err = run_main("run", scene_file(tmp_path), "--no-progress", *flags)
+    one_clean_error(rc, out, err, words)
+
+
 # ------------------------------------------------------------------------------------------------ Ctrl-C
 def test_ctrl_c_ends_a_run_with_one_line_and_keeps_its_recording(tmp_path):
     """SIGINT while a run records: exit 130, one `interrupted:` line naming the recording, no traceback, and the
