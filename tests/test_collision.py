@@ -236,8 +236,10 @@ def test_on_a_resting_drape_the_two_modes_do_the_same_tests():
     (x_exact, c_exact, _), (x_fuzzy, c_fuzzy, _) = results["exact"], results["fuzzy"]
     assert np.abs(x_exact - x_fuzzy).max() < 1e-4
     # really resting on the body: in contact (pushed, or held where the last push left them). The 4 cm sheet tents
-    # from the head to the shoulders: about 20 particles lie within 1 cm of the body, 8-14 touch it
-    assert results["fuzzy"][2] >= 8
+    # from the head to the shoulders: about 20 particles lie within 1 cm of the body, 8-14 touch it; which ones is
+    # chaotic (exact mode from its start and 3 starts moved by 1e-7 m: 9, 9, 11, 10), so the bound is half the
+    # fewest seen: a sheet that slid off or hovers touches with none
+    assert results["fuzzy"][2] >= 5
     assert c_exact["crossings"] == c_fuzzy["crossings"] == 0
     assert c_fuzzy == c_exact  # with no hit to stop at, the fuzzy order tests every mu > 0 candidate, as exact does
     assert c_fuzzy["crossing_tests"] > 0 and c_fuzzy["candidates"] >= 3 * c_fuzzy["crossing_tests"]
