@@ -35,6 +35,7 @@ import taichi as ti
 
 from clothbase.errors import warn
 from clothbase.fields import FieldBlock
+from clothbase.ordered_sum import OrderedSums
 
 from ..linear import PCG, PRECONDITIONERS, BlockSystem, ConstraintFilter, PreconditionerPolicy
 from ..runtime import PARALLEL_FROM_CPU_SOLVE, next_plan, one_thread_loops
@@ -74,6 +75,9 @@ class Implicit(Integrator):
     }
     #: the step lengths the line search tries, longest first, and the sufficient decrease it asks for
     ALPHAS = (1.0, 0.5, 0.25, 0.125)
+    #: the terms a particle or a spring adds to the step's sums: IP(alpha = 0), IP(ALPHAS...), grad.dv, then
+    #: E(alpha = 0), E(ALPHAS...), E at the start, then the external work (see _add_terms)
+    TERMS = 2 * (len(ALPHAS) + 2) + 1
     ARMIJO = 1e-4
     #: the device tally's slots: the four counters `stats` reports, the last step's relative residual, the largest
     #: energy rise [J] of a step that spent its CG budget and that step's residual, the solves that gave a
@@ -96,6 +100,7 @@ class Implicit(Integrator):
         self.warm = blk.scalar(ti.i32, ())            # 1: start CG from the last step's dv_total (Jacobi only)
         self.ip = blk.scalar(ti.f64, len(self.ALPHAS) + 2)  # IP(alpha = 0), IP(ALPHAS...), grad.dv [J]
         self.energy = blk.scalar(ti.f64, len(self.ALPHAS) + 2)  # E(alpha = 0), E(ALPHAS...), E at the start [J]
+        self.work = blk.scalar(ti.f64, ())            # the external forces' work over the step [J]
         self.cut = blk.scalar(ti.i32, ())             # line-search cuts in this step
         #: the step's Newton decisions, on the device: the first decrement [J], the last rise [J] and residual, and
         #: whether a solve stopped short of the tolerance
@@ -103,6 +108,9 @@ class Implicit(Integrator):
         #: the counters of every step so far, kept on the device and read when `stats` is asked for (TALLY order)
         self.tally = blk.scalar(ti.f64, len(self.TALLY))
         blk.finalize(self)
+        #: the terms of IP, E and the work (TERMS) of every particle or spring, added in a fixed order where the
+        #: loops run in parallel (clothbase.ordered_sum); in one thread they are added in item order as they come
+        self.sums = None if model.serial else OrderedSums(self.TERMS, max(P, model.capacity[1]))
         #: where no loop may run in one thread (a GPU), CG launches a planned number of iterations and the host reads
         #: nothing: the plan follows the largest solve of the last frame, read with its measurement (report)
         self.planned_cg = not one_thread_loops()
@@ -278,6 +286,7 @@ class Implicit(Integrator):
         warm start."""
         m, s = self.model, self.state
         NA = ti.static(len(self.ALPHAS))
+        E = ti.static(NA + 2)  # where the energies start among the terms
         self.cut[None] = 0
         self.energy[NA + 1] = 0.0
         self.system.live[None] = 1
@@ -288,14 +297,50 @@ class Implicit(Integrator):
         for i in range(m.n_particles[None]):
             self.x0[i] = s.x[i]
             self.v0[i] = s.v[i]
+            terms = ti.Vector.zero(ti.f64, self.TERMS)
             if m.inv_mass[i] != 0:
                 grav = ti.cast(self.forces.gravity[None], ti.f64)  # in the loop: see _line_search
                 mass, v, x = ti.cast(m.mass[i], ti.f64), ti.cast(s.v[i], ti.f64), ti.cast(s.x[i], ti.f64)
-                self.energy[NA + 1] += 0.5 * mass * v.dot(v) - mass * grav.dot(x)
+                terms[E + NA + 1] = 0.5 * mass * v.dot(v) - mass * grav.dot(x)
+            self._add_terms(i, terms, E + NA + 1, E + NA + 2)
+        self._close_terms(m.n_particles[None])
         ti.loop_config(serialize=self.model.serial)
         for sp in range(m.n_springs[None]):
+            terms = ti.Vector.zero(ti.f64, self.TERMS)
             stretch = ti.cast((s.x[m.spring_b[sp]] - s.x[m.spring_a[sp]]).norm() - m.rest_length[sp], ti.f64)
-            self.energy[NA + 1] += 0.5 * ti.cast(m.stiffness[sp], ti.f64) * stretch * stretch
+            terms[E + NA + 1] = 0.5 * ti.cast(m.stiffness[sp], ti.f64) * stretch * stretch
+            self._add_terms(sp, terms, E + NA + 1, E + NA + 2)
+        self._close_terms(m.n_springs[None])
+
+    @ti.func
+    def _add_terms(self, item, terms, lo: ti.template(), hi: ti.template()):
+        """A particle's or a spring's terms (a TERMS-vector of float64, zero outside lo <= k < hi) into the step's
+        sums: IP (ip), E (energy) and the work. In one thread at once, in item order; else kept for _close_terms,
+        which adds every item's in a fixed order (float atomics would add them in the threads' order)."""
+        if ti.static(self.model.serial):
+            for k in ti.static(range(lo, hi)):
+                if ti.static(k < self.TERMS // 2):
+                    self.ip[k] += terms[k]
+                elif ti.static(k < self.TERMS - 1):
+                    self.energy[k - self.TERMS // 2] += terms[k]
+                else:
+                    self.work[None] += terms[k]
+        else:
+            self.sums.put(item, terms)
+
+    @ti.func
+    def _close_terms(self, n):
+        """Where the loops run in parallel, the terms of items 0..n-1 kept by _add_terms, summed in a fixed order,
+        into ip, energy and the work (at a kernel's top level, after the loop that kept them)."""
+        if ti.static(not self.model.serial):
+            total = self.sums.total(n)
+            for k in ti.static(range(self.TERMS)):
+                if ti.static(k < self.TERMS // 2):
+                    self.ip[k] += total[k]
+                elif ti.static(k < self.TERMS - 1):
+                    self.energy[k - self.TERMS // 2] += total[k]
+                else:
+                    self.work[None] += total[k]
 
     @ti.kernel
     def _assemble(self, dt: ti.f64, h_gamma: ti.f64, first: ti.i32):
@@ -356,9 +401,9 @@ class Implicit(Integrator):
         return out
 
     @ti.func
-    def _particle_potential(self, i, hh, gamma, ext, j0: ti.template(), j1: ti.template()):
+    def _particle_potential(self, i, hh, gamma, ext, terms: ti.template(), j0: ti.template(), j1: ti.template()):
         """Adds particle i's inertia, gravity, air drag and external-force terms of IP, and its kinetic and gravity
-        energy, for the candidates j0 <= j < j1 (j = 0: alpha = 0, j: ALPHAS[j - 1])."""
+        energy, for the candidates j0 <= j < j1 (j = 0: alpha = 0, j: ALPHAS[j - 1]), to `terms` (TERMS,)."""
         m = self.model
         A = ti.static(self.ALPHAS)
         grav = ti.cast(self.forces.gravity[None], ti.f64)
@@ -372,13 +417,14 @@ class Implicit(Integrator):
             v = self._admissible(i, v0 + base + a * d)
             dvt = v - v0
             x = x0 + hh * v
-            self.ip[j] += 0.5 * mass * dvt.dot(dvt) - mass * grav.dot(x) + 0.5 * hh * gamma * mass * v.dot(v) \
+            terms[j] = 0.5 * mass * dvt.dot(dvt) - mass * grav.dot(x) + 0.5 * hh * gamma * mass * v.dot(v) \
                 - hh * ext.dot(a * d)
-            self.energy[j] += 0.5 * mass * v.dot(v) - mass * grav.dot(x)
+            terms[self.TERMS // 2 + j] = 0.5 * mass * v.dot(v) - mass * grav.dot(x)
 
     @ti.func
-    def _spring_potential(self, sp, hh, j0: ti.template(), j1: ti.template()):
-        """Adds spring sp's elastic and damping terms of IP, and its elastic energy, for the candidates j0 <= j < j1."""
+    def _spring_potential(self, sp, hh, terms: ti.template(), j0: ti.template(), j1: ti.template()):
+        """Adds spring sp's elastic and damping terms of IP, and its elastic energy, for the candidates j0 <= j < j1,
+        to `terms` (TERMS,)."""
         m = self.model
         A = ti.static(self.ALPHAS)
         ia, ib = m.spring_a[sp], m.spring_b[sp]
@@ -400,8 +446,8 @@ class Implicit(Integrator):
             stretch = (xb - xa).norm() - L0
             dvel = vb - va
             rel = dvel.dot(u)
-            self.ip[j] += 0.5 * k * stretch * stretch + 0.5 * hh * (kd * rel * rel + c * dvel.dot(dvel))
-            self.energy[j] += 0.5 * k * stretch * stretch
+            terms[j] = 0.5 * k * stretch * stretch + 0.5 * hh * (kd * rel * rel + c * dvel.dot(dvel))
+            terms[self.TERMS // 2 + j] = 0.5 * k * stretch * stretch
 
     @ti.kernel
     def _line_search(self, dt: ti.f64, search: ti.i32, k: ti.i32, newton_iterations: ti.i32, budget: ti.i32,
@@ -427,30 +473,48 @@ class Implicit(Integrator):
             self.ip[j] = 0.0
         for j in ti.static(range(NA + 1)):
             self.energy[j] = 0.0
-        work = ti.cast(0.0, ti.f64)  # of the external forces over the step [J]
+        self.work[None] = 0.0
+        E = ti.static(NA + 2)  # where the energies start among the terms
         # first the full step (j = 1, against j = 0); the shorter ones only where it does not decrease enough
         ti.loop_config(serialize=self.model.serial)
         for i in range(self.system.gated(m.n_particles[None])):
+            terms = ti.Vector.zero(ti.f64, self.TERMS)
             if m.inv_mass[i] != 0:
                 ext = ti.cast(fm.source_force(i, s.x[i], s.v[i]), ti.f64)
                 d = ti.cast(self.dv[i], ti.f64)
-                self.ip[NA + 1] -= ti.cast(self.b[i], ti.f64).dot(d)  # grad . dv (b = -S grad)
-                work += hh * ext.dot(ti.cast(self.v0[i] + self.dv_total[i], ti.f64) + d)
-                self._particle_potential(i, hh, gamma, ext, 0, 2)
+                terms[NA + 1] = -ti.cast(self.b[i], ti.f64).dot(d)  # grad . dv (b = -S grad)
+                terms[self.TERMS - 1] = hh * ext.dot(ti.cast(self.v0[i] + self.dv_total[i], ti.f64) + d)
+                self._particle_potential(i, hh, gamma, ext, terms, 0, 2)
+            self._add_terms(i, terms, 0, 2)
+            self._add_terms(i, terms, NA + 1, NA + 2)
+            self._add_terms(i, terms, E, E + 2)
+            self._add_terms(i, terms, self.TERMS - 1, self.TERMS)
+        self._close_terms(self.system.gated(m.n_particles[None]))
         ti.loop_config(serialize=self.model.serial)
         for sp in range(self.system.gated(m.n_springs[None])):
-            self._spring_potential(sp, hh, 0, 2)
+            terms = ti.Vector.zero(ti.f64, self.TERMS)
+            self._spring_potential(sp, hh, terms, 0, 2)
+            self._add_terms(sp, terms, 0, 2)
+            self._add_terms(sp, terms, E, E + 2)
+        self._close_terms(self.system.gated(m.n_springs[None]))
         full = self.ip[1] <= self.ip[0] + self.ARMIJO * self.ip[NA + 1]
         shorter = ti.cast(search != 0, ti.i32) * (1 - ti.cast(full, ti.i32))
         ti.loop_config(serialize=self.model.serial)
-        for i in range(self.system.gated(m.n_particles[None])):
-            if shorter != 0 and m.inv_mass[i] != 0:
+        for i in range(self.system.gated(m.n_particles[None]) * shorter):
+            terms = ti.Vector.zero(ti.f64, self.TERMS)
+            if m.inv_mass[i] != 0:
                 ext = ti.cast(fm.source_force(i, s.x[i], s.v[i]), ti.f64)
-                self._particle_potential(i, hh, gamma, ext, 2, NA + 1)
+                self._particle_potential(i, hh, gamma, ext, terms, 2, NA + 1)
+            self._add_terms(i, terms, 2, NA + 1)
+            self._add_terms(i, terms, E + 2, E + NA + 1)
+        self._close_terms(self.system.gated(m.n_particles[None]) * shorter)
         ti.loop_config(serialize=self.model.serial)
-        for sp in range(self.system.gated(m.n_springs[None])):
-            if shorter != 0:
-                self._spring_potential(sp, hh, 2, NA + 1)
+        for sp in range(self.system.gated(m.n_springs[None]) * shorter):
+            terms = ti.Vector.zero(ti.f64, self.TERMS)
+            self._spring_potential(sp, hh, terms, 2, NA + 1)
+            self._add_terms(sp, terms, 2, NA + 1)
+            self._add_terms(sp, terms, E + 2, E + NA + 1)
+        self._close_terms(self.system.gated(m.n_springs[None]) * shorter)
         alpha = ti.cast(A[NA - 1], ti.f64)  # the shortest, when none decreases enough
         energy = self.energy[NA]
         for jj in ti.static(range(NA)):
@@ -469,7 +533,7 @@ class Implicit(Integrator):
         # E in float32, which must not count as a gain that calls for another Newton iteration)
         start = self.energy[NA + 1]
         roundoff = ti.static(1e-6 if self.model.fp == ti.f32 else 1e-12)
-        rise = energy - start - ti.max(work, 0.0) - roundoff * ti.abs(start)
+        rise = energy - start - ti.max(self.work[None], 0.0) - roundoff * ti.abs(start)
         ti.loop_config(serialize=self.model.serial)
         for i in range(self.system.gated(m.n_particles[None])):
             if m.inv_mass[i] != 0:

@@ -13,6 +13,7 @@ r -= alpha q. A preconditioner applied by kernels starts from x = 0, where r = b
 import taichi as ti
 
 from clothbase.fields import FieldBlock
+from clothbase.ordered_sum import OrderedSums
 
 
 @ti.data_oriented
@@ -24,6 +25,9 @@ class PCG:
     The scalars, kept on the device: rz = r.z of the last look, rz_b = b.z_b, threshold = tolerance^2 rz_b and beta
     (0-d float64 fields); active (1 while iterating), iterations, max_iterations and spent (the iterations of the
     step's earlier solves, which its cap counts: the implicit step keeps it) (0-d int32 fields).
+    The dot products are summed in a fixed order: in particle order where the model's loops run in one thread, else
+    through `sums` (clothbase.ordered_sum), so that alpha and beta, and with them the state, do not follow the
+    threads' timing.
     """
 
     #: CG iterations unrolled into one kernel launch with an inline preconditioner; iterations past convergence
@@ -38,6 +42,8 @@ class PCG:
         self.rz, self.rz_b, self.threshold, self.beta = (blk.scalar(ti.f64, ()) for _ in range(4))
         self.active, self.iterations, self.max_iterations, self.spent = (blk.scalar(ti.i32, ()) for _ in range(4))
         blk.finalize(self)
+        #: the dot products' terms of a model whose loops run in parallel, added in a fixed order (None: one thread)
+        self.sums = None if model.serial else OrderedSums(2, P)
 
     def solve(self, system, filt, preconditioner, tolerance: float, max_iterations: int,
               planned: int | None = None) -> None:
@@ -139,8 +145,18 @@ class PCG:
                 if ti.static(pre.inline):
                     z = filt.apply(i, pre.precondition(i, r))
                     self.z[i] = z
-                    rz += ti.cast(r.dot(z), ti.f64)
-                    bz += ti.cast(self.b[i].dot(filt.apply(i, pre.precondition(i, self.b[i]))), ti.f64)
+                    terms = ti.Vector([r.dot(z), self.b[i].dot(filt.apply(i, pre.precondition(i, self.b[i])))], ti.f64)
+                    if ti.static(m.serial):
+                        rz += terms[0]
+                        bz += terms[1]
+                    else:
+                        self.sums.put(i, terms)
+            if ti.static(pre.inline and not m.serial):
+                if m.inv_mass[i] == 0:
+                    self.sums.put(i, ti.Vector.zero(ti.f64, 2))
+        if ti.static(pre.inline and not m.serial):
+            both = self.sums.total(system.gated(m.n_particles[None]))
+            rz, bz = both[0], both[1]
         if ti.static(pre.inline):
             self.rz_b[None] = bz
             self.threshold[None] = tol2 * bz
@@ -174,7 +190,12 @@ class PCG:
             for i in range(m.n_particles[None]):
                 z = filt.apply(i, self.z[i])
                 self.z[i] = z
-                rz += ti.cast(self.r[i].dot(z), ti.f64)
+                if ti.static(m.serial):
+                    rz += ti.cast(self.r[i].dot(z), ti.f64)
+                else:
+                    self.sums.put(i, ti.Vector([self.r[i].dot(z), 0.0], ti.f64))
+            if ti.static(not m.serial):
+                rz = self.sums.total(m.n_particles[None])[0]
             self._look(rz, first, tol2)
         beta = ti.cast(self.beta[None], m.fp)
         ti.loop_config(serialize=m.serial)
@@ -188,7 +209,12 @@ class PCG:
             if m.inv_mass[i] != 0 and self.active[None] != 0:
                 q = system.product(i, self.p, filt)
             self.q[i] = q
-            pq += ti.cast(self.p[i].dot(q), ti.f64)
+            if ti.static(m.serial):
+                pq += ti.cast(self.p[i].dot(q), ti.f64)
+            else:
+                self.sums.put(i, ti.Vector([self.p[i].dot(q), 0.0], ti.f64))
+        if ti.static(not m.serial):
+            pq = self.sums.total(m.n_particles[None])[0]
         alpha = ti.cast(0.0, ti.f64)
         if self.active[None] != 0 and pq > 0:
             alpha = self.rz[None] / pq
@@ -196,6 +222,7 @@ class PCG:
         rz_new = ti.cast(0.0, ti.f64)
         ti.loop_config(serialize=m.serial)
         for i in range(m.n_particles[None]):
+            term = ti.cast(0.0, ti.f64)
             if m.inv_mass[i] != 0 and self.active[None] != 0:
                 self.x[i] += a * self.p[i]
                 r = self.r[i] - a * self.q[i]
@@ -203,7 +230,14 @@ class PCG:
                 if ti.static(pre.inline):
                     z = filt.apply(i, pre.precondition(i, r))
                     self.z[i] = z
-                    rz_new += ti.cast(r.dot(z), ti.f64)
+                    term = ti.cast(r.dot(z), ti.f64)
+            if ti.static(pre.inline):
+                if ti.static(m.serial):
+                    rz_new += term
+                else:
+                    self.sums.put(i, ti.Vector([term, 0.0], ti.f64))
+        if ti.static(pre.inline and not m.serial):
+            rz_new = self.sums.total(m.n_particles[None])[0]
         if self.active[None] != 0:
             self.iterations[None] += 1
             if pq <= 0:
