@@ -23,6 +23,7 @@ import taichi as ti
 
 from benchmarks import output_folder, write_csv
 from clothbase.sequences import save_mesh_sequence
+from taichi_cloth import runtime
 from taichi_cloth.body.clip import mannequin_clip
 from taichi_cloth.cli import add_run_arguments
 from taichi_cloth.run import load_scene_file
@@ -85,7 +86,7 @@ def main(argv=None) -> int:
     ap.add_argument("--out", type=Path, default=Path("out/bench"))
     ap.add_argument("--body", choices=("still", "moving", "both"), default="both", help="the scenes to time")
     args = ap.parse_args(argv)
-    ti.init(arch=getattr(ti, args.arch), offline_cache=True)
+    runtime.init(args.arch)
     out = output_folder(args.out)
     clip = save_mesh_sequence(out / "mannequin_clip.npz", mannequin_clip(args.fps))
     kinds = ("still", "moving") if args.body == "both" else (args.body,)

@@ -46,7 +46,8 @@ _parallel_from: int | None = None
 def init(arch: str = "cpu", parallel_from: int | None = None, **kwargs) -> None:
     """Start Taichi on `arch` ("cpu", "gpu", "cuda" or "vulkan") unless it is already running.
 
-    Calling it again with the same arch does nothing; a different arch re-initialises Taichi
+    Taichi runs without fast math (IEEE arithmetic in the order the kernels write it: the same bits on any x86-64
+    CPU; TI_FAST_MATH=1 or fast_math=True turns it on). Calling it again with the same arch does nothing; a different arch re-initialises Taichi
     (which frees all fields: do it before building scenes). `parallel_from`: the particle count from which
     the CPU runs a cloth's loops in parallel, for every integrator (default: TAICHI_CLOTH_PARALLEL_FROM, else
     each integrator's own, see serial_loops).
@@ -62,6 +63,11 @@ def init(arch: str = "cpu", parallel_from: int | None = None, **kwargs) -> None:
     global _saves_cache_at_exit
     kwargs.setdefault("offline_cache", True)
     kwargs.setdefault("log_level", ti.WARN)
+    if "TI_FAST_MATH" not in os.environ:
+        # IEEE arithmetic: fast math lets LLVM reassociate a sum into as many partial sums as the CPU's vectors are
+        # wide, so a drape's last bits, and with them a chaotic outcome, followed the CPU model (and it bought no
+        # speed: the demo T-shirt ran 0.97x the time without it; docs/performance.md, reproducible runs)
+        kwargs.setdefault("fast_math", False)
     if kwargs["offline_cache"]:
         clear_stale_cache_lock(Path(kwargs.get("offline_cache_file_path") or cache_folder()))
     ti.init(arch=gpu_arch() if arch == "gpu" else _ARCHS[arch], **kwargs)
