@@ -217,10 +217,13 @@ def test_resting_contact_does_not_jitter():
 
 @pytest.mark.slow
 def test_on_a_resting_drape_the_two_modes_do_the_same_tests():
-    """A sheet settling onto the mannequin's head and shoulders, 150 steps in exact and in fuzzy mode: no particle
-    ever crosses a face (the proximity push keeps them out), so the ranking has nothing to cut: both modes do the
-    same crossing tests and end in the same place. What cuts the tests below the candidates is the possibility
-    filter the two modes share (faces with mu = 0 are never tested): at least 3x here."""
+    """A sheet settling onto the mannequin's head and shoulders, 150 steps in exact and in fuzzy mode: the proximity
+    push keeps nearly every particle out, so the ranking has almost nothing to cut: both modes take the same
+    candidates, catch the same crossings and end in the same place, nothing inside the body. What cuts the tests
+    below the candidates is the possibility filter the two modes share (faces with mu = 0 are never tested): at
+    least 3x here. Whether a particle crosses once while the sheet settles follows the start's last bits (0 where
+    this test was written, 1 on another CPU from its start and 3 starts moved by 1e-7 m; the fuzzy mode then stops
+    at the hit and skips 6-8 of the exact mode's tests): bounded, not asserted exact."""
     from collision.mannequin import load_mannequin
 
     m = load_mannequin()
@@ -240,8 +243,12 @@ def test_on_a_resting_drape_the_two_modes_do_the_same_tests():
     # chaotic (exact mode from its start and 3 starts moved by 1e-7 m: 9, 9, 11, 10), so the bound is half the
     # fewest seen: a sheet that slid off or hovers touches with none
     assert results["fuzzy"][2] >= 5
-    assert c_exact["crossings"] == c_fuzzy["crossings"] == 0
-    assert c_fuzzy == c_exact  # with no hit to stop at, the fuzzy order tests every mu > 0 candidate, as exact does
+    assert body.signed_distance(x_fuzzy).min() >= -5e-4  # caught crossings are undone: nothing ends inside
+    assert c_exact["crossings"] == c_fuzzy["crossings"] <= 3  # of 38,400 particle steps
+    assert c_fuzzy["candidates"] == c_exact["candidates"] and c_fuzzy["queries"] == c_exact["queries"]
+    # the fuzzy order tests every mu > 0 candidate as exact does, except the ones a caught crossing lets it skip
+    cut = c_exact["crossing_tests"] - c_fuzzy["crossing_tests"]
+    assert 0 <= cut <= 20 * c_exact["crossings"]
     assert c_fuzzy["crossing_tests"] > 0 and c_fuzzy["candidates"] >= 3 * c_fuzzy["crossing_tests"]
 
 
