@@ -9,7 +9,8 @@ import rerun as rr
 from matplotlib.image import imread
 
 from taichi_cloth.frame import FrameSnapshot, SceneLayout
-from taichi_cloth.recorder import CAMERA_FOV_Y, VIEW_ASPECT, Recorder
+from taichi_cloth.blueprint import CAMERA_FOV_Y, VIEW_ASPECT
+from taichi_cloth.recorder import Recorder
 from taichi_cloth.still import FRAME_MARGIN
 from taichi_cloth.strain import STRAIN_STOPS, strain_colormap
 
