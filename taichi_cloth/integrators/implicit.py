@@ -318,13 +318,7 @@ class Implicit(Integrator):
         sums: IP (ip), E (energy) and the work. In one thread at once, in item order; else kept for _close_terms,
         which adds every item's in a fixed order (float atomics would add them in the threads' order)."""
         if ti.static(self.model.serial):
-            for k in ti.static(range(lo, hi)):
-                if ti.static(k < self.TERMS // 2):
-                    self.ip[k] += terms[k]
-                elif ti.static(k < self.TERMS - 1):
-                    self.energy[k - self.TERMS // 2] += terms[k]
-                else:
-                    self.work[None] += terms[k]
+            self._add_to_sums(terms, lo, hi)
         else:
             self.sums.put(item, terms)
 
@@ -333,14 +327,18 @@ class Implicit(Integrator):
         """Where the loops run in parallel, the terms of items 0..n-1 kept by _add_terms, summed in a fixed order,
         into ip, energy and the work (at a kernel's top level, after the loop that kept them)."""
         if ti.static(not self.model.serial):
-            total = self.sums.total(n)
-            for k in ti.static(range(self.TERMS)):
-                if ti.static(k < self.TERMS // 2):
-                    self.ip[k] += total[k]
-                elif ti.static(k < self.TERMS - 1):
-                    self.energy[k - self.TERMS // 2] += total[k]
-                else:
-                    self.work[None] += total[k]
+            self._add_to_sums(self.sums.total(n), 0, self.TERMS)
+
+    @ti.func
+    def _add_to_sums(self, terms, lo: ti.template(), hi: ti.template()):
+        """ip, energy and the work += the entries lo <= k < hi of `terms` (TERMS,) in that layout."""
+        for k in ti.static(range(lo, hi)):
+            if ti.static(k < self.TERMS // 2):
+                self.ip[k] += terms[k]
+            elif ti.static(k < self.TERMS - 1):
+                self.energy[k - self.TERMS // 2] += terms[k]
+            else:
+                self.work[None] += terms[k]
 
     @ti.kernel
     def _assemble(self, dt: ti.f64, h_gamma: ti.f64, first: ti.i32):

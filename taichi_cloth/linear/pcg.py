@@ -84,6 +84,15 @@ class PCG:
             first = 0
 
     @ti.func
+    def _sum(self, acc: ti.template(), i, term):
+        """acc += term (float64), in particle order where the model's loops run in one thread; else particle i's
+        term is kept for sums.total (its order fixed by the index, not by the threads)."""
+        if ti.static(self.model.serial):
+            acc += ti.cast(term, ti.f64)
+        else:
+            self.sums.put(i, ti.Vector([term, 0.0], ti.f64))
+
+    @ti.func
     def _look(self, rz, first, tol2):
         """The test on r.z of the current residual (first: the start, r = b): stop, or beta for the next p."""
         if first != 0:
@@ -190,10 +199,7 @@ class PCG:
             for i in range(m.n_particles[None]):
                 z = filt.apply(i, self.z[i])
                 self.z[i] = z
-                if ti.static(m.serial):
-                    rz += ti.cast(self.r[i].dot(z), ti.f64)
-                else:
-                    self.sums.put(i, ti.Vector([self.r[i].dot(z), 0.0], ti.f64))
+                self._sum(rz, i, self.r[i].dot(z))
             if ti.static(not m.serial):
                 rz = self.sums.total(m.n_particles[None])[0]
             self._look(rz, first, tol2)
@@ -209,10 +215,7 @@ class PCG:
             if m.inv_mass[i] != 0 and self.active[None] != 0:
                 q = system.product(i, self.p, filt)
             self.q[i] = q
-            if ti.static(m.serial):
-                pq += ti.cast(self.p[i].dot(q), ti.f64)
-            else:
-                self.sums.put(i, ti.Vector([self.p[i].dot(q), 0.0], ti.f64))
+            self._sum(pq, i, self.p[i].dot(q))
         if ti.static(not m.serial):
             pq = self.sums.total(m.n_particles[None])[0]
         alpha = ti.cast(0.0, ti.f64)
@@ -232,10 +235,7 @@ class PCG:
                     self.z[i] = z
                     term = ti.cast(r.dot(z), ti.f64)
             if ti.static(pre.inline):
-                if ti.static(m.serial):
-                    rz_new += term
-                else:
-                    self.sums.put(i, ti.Vector([term, 0.0], ti.f64))
+                self._sum(rz_new, i, term)
         if ti.static(pre.inline and not m.serial):
             rz_new = self.sums.total(m.n_particles[None])[0]
         if self.active[None] != 0:
