@@ -288,16 +288,22 @@ class SelfCollision(ParticleCollider):
         self.zone_log[ti.cast(k % RECENT_STEPS, ti.i32)] = ti.Vector([dt, ti.cast(self.step_zones[None], ti.f64)])
         self.zone_steps[None] = k + 1
 
-    def zones_in_last(self, seconds: float) -> int:
-        """The impact zones made in the last `seconds` [s] of steps (at most the last RECENT_STEPS steps)."""
+    def recent_zones(self, seconds: float) -> list[int]:
+        """The impact zones made by each of the last `seconds` [s] of steps, newest first (at most the last
+        RECENT_STEPS steps)."""
         steps, log = int(self.zone_steps[None]), self.zone_log.to_numpy()
-        total, span = 0, 0.0
+        out, span = [], 0.0
         for k in range(steps - 1, max(steps - RECENT_STEPS, 0) - 1, -1):
             if span >= seconds:
                 break
             dt, zones = log[k % RECENT_STEPS]
-            total, span = total + int(zones), span + dt
-        return total
+            out.append(int(zones))
+            span += dt
+        return out
+
+    def zones_in_last(self, seconds: float) -> int:
+        """The impact zones made in the last `seconds` [s] of steps (at most the last RECENT_STEPS steps)."""
+        return sum(self.recent_zones(seconds))
 
     # ------------------------------------------------------------------ reported with the frame's measurement
     report_slots = 1  # the most (triangle, cell) pairs a grid rebuild asked for since the last frame
