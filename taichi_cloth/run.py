@@ -15,7 +15,8 @@ from pathlib import Path
 
 from . import runtime
 from .control import ModelChange
-from .errors import BlowUpError, SceneError
+from .errors import BlowUpError, MeshError, SceneError, TaichiClothError
+from .garment.ease import scene_too_small, too_small_message
 from .garment.metrics import garment_quality
 from .guards import check_run_length
 from .paths import free_stem
@@ -63,12 +64,23 @@ def _perturbation(args: argparse.Namespace) -> tuple[float | None, int]:
     return float(perturb), 0 if seed is None else int(seed)
 
 
+def _too_small(scene) -> str:
+    """Why a garment's seams could not close, in garment terms ("too small: the hem is 104 cm and the hips 110
+    cm"), or "" where the garment is not too small or the body cannot be measured."""
+    try:
+        return too_small_message(scene_too_small(scene))
+    except (TaichiClothError, MeshError):
+        return ""
+
+
 def run_scene_file(source: str | Path | dict, args: argparse.Namespace, quiet: bool = False,
                    base_dir: str | Path | None = None) -> tuple[RunSummary, LoadedScene]:
     """Load `source` as `load_scene_file` does, run its frames, record them to OUT/NAME.rrd when its [output]
     record is on (a garment's pattern included) and export the final mesh beside it when [output] mesh is
     on (NAME-2, NAME-3... when an earlier run's files are there: nothing is overwritten); --png adds the still
-    pictures. Prints the summary (and a garment's quality table) unless `quiet`; the recording is the first of
+    pictures. A garment whose sewing gave up and that is too small for its body says so among the summary's warnings
+    (taichi_cloth.garment.ease: "too small: the hem is 104 cm and the hips 110 cm"). Prints the summary (and a
+    garment's quality table) unless `quiet`; the recording is the first of
     the summary's outputs.
 
     Returns (summary, loaded scene). Raises SceneError/MeshError for bad input and BlowUpError (with .summary)
@@ -111,6 +123,12 @@ def run_scene_file(source: str | Path | dict, args: argparse.Namespace, quiet: b
                     summary.outputs.append(str(scene.export_mesh(out / f"{stem}{suffix}")))
             if png:
                 summary.outputs += [str(p) for p in write_pictures(scene, out / stem)]
+    sewing = scene.controller("sewing")
+    if sewing is not None and sewing.gave_up:
+        small = _too_small(scene)
+        if small:
+            summary.warnings.append(f"{small} (the garment at its stretch limit, the cloth at the body's collision "
+                                    "thickness: taichi_cloth.garment.ease)")
     if not quiet:
         print(summary.format())
         if scene.controller("sewing") is not None:

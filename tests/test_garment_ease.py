@@ -101,3 +101,25 @@ def test_the_skirt_is_too_small_on_a_waist_of_74_cm_not_on_the_mannequin(skirt):
     assert [e.part for e in small] == ["waistband"]
     assert small[0].body == pytest.approx(0.74, abs=1.5e-3) and small[0].garment == pytest.approx(0.68, abs=1e-9)
     assert too_small_message(small).startswith("too small: the waistband is 68 cm and the waist 7")
+
+
+def test_a_batch_job_with_open_seams_on_a_body_too_large_is_too_small_with_the_reason(skirt):
+    """figures.seams_open_status on a stand-in of a finished scene: the skirt on the mannequin stays "seams open",
+    on a body of waist 74 cm it is "too small", the reason in garment terms first."""
+    from types import SimpleNamespace
+
+    from taichi_cloth.batch.figures import SEAMS_OPEN, STATUSES, TOO_SMALL, seams_open_status
+    from taichi_cloth.body import fit_body
+
+    def scene(vertices):
+        parts = {"sewing": SimpleNamespace(garment=skirt), "stretch_limit": SimpleNamespace(max_strain=0.1),
+                 "colliders": SimpleNamespace(bodies=[SimpleNamespace(vertices_np=vertices, thickness=0.004)])}
+        return SimpleNamespace(controller=parts.get)
+
+    assert STATUSES.index(TOO_SMALL) == STATUSES.index(SEAMS_OPEN) - 1
+    assert seams_open_status(scene(skirt.body.vertices), "sewing gave up") == (SEAMS_OPEN, "sewing gave up")
+    fit = fit_body({"waist": 0.74}, tolerance=1e-3)
+    status, reason = seams_open_status(scene(fit.vertices), "sewing gave up; left side 12.0 mm")
+    assert status == TOO_SMALL
+    assert reason.startswith("too small: the waistband is 68 cm and the waist 7")
+    assert reason.endswith("; sewing gave up; left side 12.0 mm")

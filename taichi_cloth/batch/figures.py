@@ -1,10 +1,13 @@
 """A finished job's status and figures: the garment quality row (taichi_cloth.garment.metrics) and the gap between
 the garment and the body at the chest, waist and hips.
 
-Status, first that holds: "seams open" (a seam pair still wider than the sewing's epsilon at the end: sewing gave
+Status, first that holds: "too small" (seams open, as below, and the garment too small for the body at one of its
+girths: taichi_cloth.garment.ease, the reason in garment terms, "too small: the waistband is 68 cm and the waist
+74 cm", then the open seams), "seams open" (a seam pair still wider than the sewing's epsilon at the end: sewing gave
 up, or was still closing at the frame cap), "inside the body" (more particles inside the body than [run]
-max_inside), "not at rest by the cap" (with until_rest: the cap came first), else "ok". A run that blew up, ran
-out of time or failed never gets here (the worker and the scheduler name those).
+max_inside), "not at rest by the cap" (with until_rest: the cap came first), else "ok". The too-small check is made only
+once the seams stayed open, never before the run: it is a bound at the stretch limit, and an opening can ride to a
+narrower part of the body (taichi_cloth.garment.ease). A run that blew up, ran out of time or failed never gets here (the worker and the scheduler name those).
 
 The gap at a girth: the median distance [m] to the body's surface of the cloth particles within GAP_BAND of the
 girth's plane (the horizontal plane the `body` command measures that girth on, on this body); None where no
@@ -14,6 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..errors import MeshError, TaichiClothError
 from ..garment.metrics import garment_quality
 
 #: the girths whose gap to the garment a row reports
@@ -23,8 +27,10 @@ GAP_BAND = 0.015
 
 OK, SEAMS_OPEN, INSIDE, NOT_AT_REST = "ok", "seams open", "inside the body", "not at rest by the cap"
 BLEW_UP, TIMED_OUT, ERROR = "blew up", "timed out", "error"
+#: seams open because the garment is smaller than the body (the reason says where, in garment terms)
+TOO_SMALL = "too small"
 #: every status a row can have, the good one first
-STATUSES = (OK, BLEW_UP, SEAMS_OPEN, NOT_AT_REST, INSIDE, TIMED_OUT, ERROR)
+STATUSES = (OK, BLEW_UP, TOO_SMALL, SEAMS_OPEN, NOT_AT_REST, INSIDE, TIMED_OUT, ERROR)
 
 
 def body_gaps(scene) -> dict:
@@ -49,6 +55,22 @@ def body_gaps(scene) -> dict:
     return out
 
 
+def seams_open_status(scene, reason: str) -> tuple[str, str]:
+    """(status, reason) of a job whose seams stayed open: TOO_SMALL with the garment's too-small girths in words
+    before `reason` (the open seams) where the garment is too small for the body (ease.scene_too_small), else
+    SEAMS_OPEN with `reason`. A check that cannot measure this body (not a morph of the mannequin, and no girths
+    found on it) leaves SEAMS_OPEN."""
+    from ..garment.ease import scene_too_small, too_small_message
+
+    try:
+        small = scene_too_small(scene)
+    except (TaichiClothError, MeshError):
+        small = []
+    if not small:
+        return SEAMS_OPEN, reason
+    return TOO_SMALL, "; ".join(x for x in (too_small_message(small), reason) if x)
+
+
 def finished_row(scene, summary, run: dict) -> dict:
     """The status, its reason and the figures of a job whose run ended (at rest or at the cap)."""
     quality = garment_quality(scene)
@@ -71,7 +93,7 @@ def finished_row(scene, summary, run: dict) -> dict:
     if opened or (sewing is not None and (sewing.active or sewing.gave_up)):
         why = "sewing gave up" if sewing.gave_up else ("still sewing at the frame cap" if sewing.active else "")
         seams = ", ".join(f"{k} {1e3 * v:.1f} mm" for k, v in opened.items())
-        status, reason = SEAMS_OPEN, "; ".join(x for x in (why, seams) if x)
+        status, reason = seams_open_status(scene, "; ".join(x for x in (why, seams) if x))
     elif inside > run["max_inside"]:
         status, reason = INSIDE, f"{inside} particles inside the body (max_inside {run['max_inside']})"
     elif run["until_rest"] and not summary.stopped_at_rest:
