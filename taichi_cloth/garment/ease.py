@@ -52,7 +52,7 @@ __all__ = ["Ease", "DEFAULT_STRETCH", "garment_girths", "scene_girths", "too_sma
 PLANE_GIRTHS = ("chest", "waist", "hips")
 #: a torso opening is compared with the nearest of these (by the height of its plane)
 OPENING_GIRTHS = ("neck", "chest", "waist", "hips")
-#: [m] a girth plane that meets the garment where its cut does not close (an armhole: the T-shirt's 1 cm below the
+#: [m] a girth plane that meets the garment where its cut does not close (an armhole: the T-shirt's 1.25 cm below the
 #: mannequin's bust) is moved down by PLANE_STEP until it closes, by PLANE_DROP at most
 PLANE_DROP, PLANE_STEP = 0.05, 0.0025
 #: the garment's name for its circumference at a girth plane
