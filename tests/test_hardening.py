@@ -451,7 +451,7 @@ def test_a_full_disk_is_one_line_naming_the_file(monkeypatch, capsys):
 @pytest.mark.parametrize("args, words", [
     (["--integrators", "explicit", "rk4"], "--integrators: unknown integrator 'rk4'; choose from explicit, verlet"),
     (["--sizes", "32", "1"], "--sizes: every n must be >= 4 (n x n particles), got 32 1"),
-    (["--material", "wool"], "--material: unknown material 'wool'; choose from silk, cotton"),
+    (["--material", "velvet"], "--material: unknown material 'velvet'; choose from silk, cotton"),
     (["--garment", "missing.toml"], "--garment missing.toml: no such scene file"),
     # no implicit row would time the garment: the file named is still checked (issue 48: this ran silently)
     (["--sizes", "8", "--integrators", "explicit", "--garment", "missing.toml"],
