@@ -63,7 +63,8 @@ and a component whose table is absent is never built. The schema (units in brack
     # garment = "skirt.toml"     # a garment file (taichi_cloth.garment.garmentfile): pieces placed around the
                                   # mannequin, sewn, joined, draped; [cloth] material overrides the file's
     [sewing]                      # for a garment: close_speed [m/s] = 0.5 (seam rest lengths shrink this fast),
-                                  # max_force [N] = 5 (cap per pair), stiffness [N/m] (default sheet modulus / 2),
+                                  # max_force [N] (a fixed cap per pair; default: scaled with the seam's stiffness,
+                                  # 1.1 x its closing in one step), stiffness [N/m] (default sheet modulus / 2),
                                   # epsilon [m] = 0.002 and energy_tolerance = 0.01 (when sewing stops), gravity =
                                   # false (while sewing), join = "merge" | "spring" | "none", join_stiffness [N/m],
                                   # max_time [s] = 10, stall_gap = 0.25 (a stalled seam closes below this
@@ -157,7 +158,7 @@ SCHEMA = Table({
                          "window": Field("int", 10, at_least(1)),
                          "max_time": Field("number", 3.0, positive)}, always=True),
     }),
-    "sewing": Table({"close_speed": Field("number", 0.5, positive), "max_force": Field("number", 5.0, positive),
+    "sewing": Table({"close_speed": Field("number", 0.5, positive), "max_force": Field("number", None, positive),
                      "epsilon": Field("number", 0.002, positive), "energy_tolerance": Field("number", 1e-2, positive),
                      "gravity": Field("bool", False),
                      "join": Field("str", "merge", choices=("merge", "spring", "none")),
