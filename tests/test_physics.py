@@ -228,6 +228,26 @@ def test_stretch_limit_holds_the_limit():
     assert sc.controller("stretch_limit").stats["stretch_unconverged_steps"] < 0.05 * 480
 
 
+@pytest.mark.parametrize("speed", [0.0, 0.05, 0.5, -0.3])
+def test_the_stretch_limit_takes_the_stretching_velocity_and_gives_none(speed):
+    """A two-particle chain, one end pinned, the other 20 % beyond its 1 m rest length and moving along the spring at
+    `speed` [m/s] (outward > 0): one limiting pass puts it at the 10 % limit (omega 1, one spring: exact). Its velocity
+    along the spring loses what stretched it, at most the correction over the step (0.1 m / h), and gains nothing:
+    at rest it stays at rest, and the kinetic energy never grows. (Adding the correction over h, as Provot does, gave
+    the resting particle 0.1 m / h = 12 m/s inward.)"""
+    h = 1 / 120
+    sc = tc.Scene(tc.ClothBuilder.chain(2, 1.0, 0.01, 100.0), integrator="implicit", dt=h, precision="f64",
+                  gravity=(0, 0, 0), pins=[{"indices": [0]}],
+                  stretch_limit={"max_strain": 0.1, "iterations": 1, "omega": 1.0})
+    sc.state.set(x=[[0, 0, 0], [0, -1.2, 0]], v=[[0, 0, 0], [0, -speed, 0]])
+    sc.controller("stretch_limit").apply(h)
+    x, v = sc.positions(), sc.velocities()
+    assert x[1, 1] == pytest.approx(-1.1, abs=1e-12)
+    expected = -max(0.0, speed - 0.1 / h) if speed > 0 else -speed  # inward motion is left alone
+    assert v[1] == pytest.approx([0.0, expected, 0.0], abs=1e-12)
+    assert abs(v[1, 1]) <= abs(speed) + 1e-15
+
+
 def test_internal_forces_conserve_momentum(free_sheet):
     """No gravity, no pins, no drag: total momentum of a deformed, moving sheet is constant. approx-implicit's
     filter conserves it only where every particle has the same r = h^2 K / (m + h^2 K) (then sum m dv = (1 - r)
