@@ -85,6 +85,8 @@ KINDS: dict[str, tuple[Callable[[Any], bool], str]] = {
     "vec3": (vector(3), "a list of 3 numbers"),
     "int2": (vector(2, is_int), "a list of 2 integers"),
     "ints": (lambda v: isinstance(v, list) and all(is_int(x) for x in v), "a list of integers"),
+    "strs": (lambda v: isinstance(v, list) and len(v) > 0 and all(isinstance(x, str) for x in v),
+             "a non-empty list of strings"),
     "points": (lambda v: isinstance(v, list) and all(vector(3)(p) for p in v),
                "a list of [x, y, z] points"),
     "keyframes": (lambda v: isinstance(v, list) and len(v) > 0 and all(vector(4)(p) for p in v),

@@ -189,6 +189,19 @@ def test_the_scheduler_retries_a_dead_worker_once_stops_a_job_past_its_timeout_a
     assert list(rows) == ["a"] and backend.closed  # what finished is kept; what ran is stopped
 
 
+def test_a_garment_that_names_its_bodies_is_fitted_to_those_only(tmp_path):
+    """The garment matrix's form: each garment on the bodies of its size range, every material."""
+    spec = write_spec(tmp_path, f"""
+garments = [{{ file = "{GARMENTS / 'skirt.toml'}", bodies = ["mannequin", "S60"] }}, "{GARMENTS / 'top.toml'}"]
+materials = ["silk", "denim"]
+bodies = ["mannequin", {{ name = "S60", waist = 60, hips = 88 }}, {{ name = "T80", chest = 80 }}]
+""")
+    labels = [job.label for job in make_jobs(load_spec(spec, tmp_path / "out"))]
+    assert labels == ["skirt_mannequin_silk", "skirt_S60_silk", "skirt_mannequin_denim", "skirt_S60_denim",
+                      "top_mannequin_silk", "top_S60_silk", "top_T80_silk", "top_mannequin_denim", "top_S60_denim",
+                      "top_T80_denim"]
+
+
 @pytest.mark.parametrize("text, message", [
     ("garments = []", "garments: must be a non-empty list"),
     ('garments = ["nowhere.toml"]', "garments #1: "),
@@ -198,6 +211,8 @@ def test_the_scheduler_retries_a_dead_worker_once_stops_a_job_past_its_timeout_a
     (f'garments = ["{GARMENTS / "skirt.toml"}"]\n[[jobs]]\ngarment = "tshirt"',
      "[[jobs]] #1 garment: 'tshirt' is not one of the batch's garments: skirt"),
     (f'garments = ["{GARMENTS / "skirt.toml"}"]\n[run]\nframs = 3', "[run]: unknown key 'frams'"),
+    (f'garments = [{{ file = "{GARMENTS / "skirt.toml"}", bodies = ["S"] }}]',
+     "garments #1 bodies: 'S' is not one of the batch's bodies: mannequin"),
 ])
 def test_a_bad_spec_is_one_line_naming_the_key(tmp_path, capsys, text, message):
     spec = write_spec(tmp_path, text)

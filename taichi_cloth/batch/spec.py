@@ -1,7 +1,9 @@
 """A batch spec (TOML): the garments, bodies and materials a batch fits, how each job runs, where it writes.
 
     name = "size_chart"                        # the batch's name (default: the file's stem)
-    garments = ["../garments/tshirt.toml"]     # garment files, or tables { file = "...", name = "..." }
+    garments = ["../garments/tshirt.toml"]     # garment files, or tables { file = "...", name = "...",
+                                               #   bodies = ["mannequin", "S"] }: bodies, the ones it is cut for
+                                               #   (default: every body of the spec)
     materials = ["cotton", "denim"]            # presets, or tables { name = "stiff", preset = "cotton", bend = 1e-5 }
                                                # (the [cloth.material] keys); default: each garment file's own
     bodies = ["mannequin"]                     # "mannequin" (the shipped body), or tables of tape girths in CM:
@@ -68,7 +70,7 @@ RUN_TABLE = Table({
 
 BODY_TABLE = Table({"name": Field("str"), "tolerance": Field("number", 0.1, positive),
                     **{g: Field("number", None, positive) for g in BODY_GIRTHS}})
-GARMENT_TABLE = Table({"file": Field("str"), "name": Field("str", None)})
+GARMENT_TABLE = Table({"file": Field("str"), "name": Field("str", None), "bodies": Field("strs", None)})
 JOB_TABLE = Table({"garment": Field("str"), "body": Field("str", MANNEQUIN), "material": Field("str", None),
                    "run": Table({}, extra=True)})
 #: the spec's keys besides its lists (garments, bodies, materials, jobs: LISTS, read item by item)
@@ -82,8 +84,11 @@ NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.+-]*$")
 
 @dataclass
 class Garment:
+    """name; path; bodies: the names of the bodies it is fitted to (None: every body of the spec)."""
+
     name: str
     path: Path
+    bodies: list | None = None
 
 
 @dataclass
@@ -160,7 +165,7 @@ def load_spec(path: str | Path, out: str | Path | None = None) -> BatchSpec:
             load_garment(file)
         except PatternError as exc:
             v.fail(where, str(exc))
-        return Garment(_name(v, g["name"] or file.stem, where), file.resolve())
+        return Garment(_name(v, g["name"] or file.stem, where), file.resolve(), g["bodies"])
 
     def body(item, where):
         if item == MANNEQUIN:
@@ -189,6 +194,11 @@ def load_spec(path: str | Path, out: str | Path | None = None) -> BatchSpec:
     materials = _tables(v, raw["materials"], "materials", "presets", material) or [MaterialSpec("garment", None)]
     for items, key in ((garments, "garments"), (bodies, "bodies"), (materials, "materials")):
         _unique(v, items, key)
+    for k, g in enumerate(garments):
+        unknown = [b for b in g.bodies or [] if b not in {b.name for b in bodies}]
+        if unknown:
+            v.fail(f"garments #{k + 1} bodies", f"{unknown[0]!r} is not one of the batch's bodies: "
+                                                 f"{', '.join(b.name for b in bodies)}")
     run = cfg["run"]
     _check_run(v, run, base, "[run]")
     jobs = None
