@@ -76,6 +76,41 @@ def test_a_seam_that_stalls_short_of_epsilon_joins_below_a_quarter_of_its_spacin
         assert any("open seams middle" in w for w in summary.warnings), summary.warnings
 
 
+def test_a_stiffer_fabric_sews_as_fast_because_its_seams_pull_harder():
+    """The seam pull scales with the seam's stiffness (k_s = sheet modulus / 2): a pair's spring is never stretched
+    more than REACH x close_speed x dt beyond its rest length. Two free squares 0.2 m apart in zero gravity, in cotton
+    and in a cotton 8 times as stiff: both close at the ramp's 0.5 m/s (the fixed 5 N cap of before closed the stiff
+    one at 0.14 m/s, in 1.4 s), and the stiff one's pairs pull 8 times as hard."""
+    from taichi_cloth.garment.sewing import Sewing
+
+    closed, pull = {}, {}
+    for scale in (1.0, 8.0):
+        cotton = tc.MATERIALS["cotton"]
+        spec = two_squares()
+        spec.material = cotton.replace(stretch=cotton.stretch * scale, shear=cotton.shear * scale)
+        g = build_garment(spec)
+        dt = 1 / 240
+        scene = tc.Scene(g, integrator="implicit", dt=dt, gravity=(0, 0, 0), sewing=dict(close_speed=0.5))
+        sewing = scene.controller("sewing")
+        scene.run(12, progress=False)  # 0.2 s: halfway
+        d = scene.model
+        first, n = g.first_seam_spring, len(g.seam_pairs)
+        k = d.stiffness.to_numpy()[first:first + n].astype(np.float64)
+        rest = d.rest_length.to_numpy()[first:first + n].astype(np.float64)
+        x = scene.positions()
+        a, b = d.spring_a.to_numpy()[first:first + n], d.spring_b.to_numpy()[first:first + n]
+        stretch = np.linalg.norm(x[b] - x[a], axis=1) - rest
+        reach = Sewing.REACH * 0.5 * dt
+        assert stretch.max() <= reach * (1 + 1e-3)  # the cap: never stretched beyond one step's reach
+        pull[scale] = float((k * stretch).max())
+        scene.run(36, progress=False)  # to 0.8 s
+        assert sewing.joined, scale
+        closed[scale] = sewing.closed_at
+    assert pull[8.0] == pytest.approx(8 * pull[1.0], rel=0.05)
+    # the ramp takes GAP / close_speed = 0.4 s; both stop within the same two frames
+    assert closed[1.0] <= 0.6 and abs(closed[8.0] - closed[1.0]) <= 2 / 60 + 1e-9, closed
+
+
 def test_two_squares_close_below_epsilon_and_stay_below_the_stretch_limit():
     g = build_garment(two_squares())
     scene = tc.Scene(g, integrator="implicit", dt=1 / 240, gravity=(0, 0, 0), stretch_limit=dict(max_strain=0.1),
