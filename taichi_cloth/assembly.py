@@ -162,6 +162,8 @@ def assemble(cloth, *, name: str = "cloth", integrator: str = DEFAULT_INTEGRATOR
     limit = StretchLimit(model, state, contacts, **stretch_limit) if stretch_limit else None
     sew = _sewing(model, state, forces, contacts, source.garment, sewing, source.garment_levels) \
         if source.garment is not None else None
+    if limit is not None:
+        limit.sewing = sew
     morph = _body_morph(body_morph, collide, sew, clock.dt) if body_morph is not None else None
     for body in collide.bodies if collide is not None else []:
         if body.deforming and body.start == "sewn" and sew is not None:  # its motion begins once the seams are joined

@@ -39,7 +39,8 @@ and a component whose table is absent is never built. The schema (units in brack
     # indices = [0, 47]; box = { min = [..], max = [..] }; keyframes = [[t, dx, dy, dz], ...] moves the group
 
     [wind]                        # velocity [m/s], coefficient [kg/(m^2 s)], gust (relative), gust_frequency [Hz]
-    [stretch_limit]               # max_strain (0.1 = 10 %), iterations (max passes), tolerance, omega
+    [stretch_limit]               # max_strain (0.1 = 10 %), iterations (max passes), tolerance, omega, after_join =
+                                  # true (a garment: false leaves the drape to the fabric once the seams are joined)
     [[colliders]]                 # type = "sphere" (center, radius) | "capsule" (a, b, radius) | "plane" (point,
                                   # normal) | "mesh" (path: a file or "mannequin", scale, translate, cell_size,
                                   # mode = "fuzzy" | "exact", repulsion = {stiffness [N], distance [m],
@@ -144,7 +145,8 @@ SCHEMA = Table({
     "stretch_limit": Table({"max_strain": Field("number", 0.1, positive),
                             "iterations": Field("int", 100, at_least(1)),
                             "tolerance": Field("number", 1e-3, nonneg),
-                            "omega": Field("number", 1.5, lambda v: None if 0 < v < 2 else "must lie in (0, 2)")}),
+                            "omega": Field("number", 1.5, lambda v: None if 0 < v < 2 else "must lie in (0, 2)"),
+                            "after_join": Field("bool", True)}),
     "colliders": Array(COLLIDER_TABLE),
     "multilevel": Table({
         "levels": Field("int", None, lambda v: None if 1 <= v <= 8 else "must lie in 1..8"),

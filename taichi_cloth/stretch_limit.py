@@ -41,10 +41,12 @@ class StretchLimit(Controller):
     contacts: the scene's Contacts (None without colliders); max_strain: allowed relative elongation (0.1 = 10 %); iterations: the most Jacobi passes per step;
     tolerance: stop once every limited spring is within max_strain + tolerance (strain units);
     omega: over-relaxation of the averaged correction; kinds: spring kinds limited (default structural
-    and shear, as Provot)."""
+    and shear, as Provot); after_join: for a garment, whether the limit goes on once the seams are joined (False: it
+    holds the pieces while they are sewn, and the drape is left to the fabric's own stiffness; `sewing`, the scene's
+    sewing controller, is set by the scene)."""
 
     def __init__(self, model, state, contacts=None, max_strain: float = 0.1, iterations: int = 100, tolerance: float = 1e-3,
-                 omega: float = 1.5, kinds=(SpringKind.STRUCTURAL, SpringKind.SHEAR)):
+                 omega: float = 1.5, kinds=(SpringKind.STRUCTURAL, SpringKind.SHEAR), after_join: bool = True):
         if max_strain <= 0:
             raise ValueError(f"stretch limit max_strain must be > 0, got {max_strain}")
         if iterations < 1:
@@ -60,6 +62,8 @@ class StretchLimit(Controller):
         self.max_strain, self.iterations = float(max_strain), int(iterations)
         self.tolerance, self.omega = float(tolerance), float(omega)
         self.kinds = tuple(SpringKind(k) for k in kinds)
+        self.after_join = bool(after_join)
+        self.sewing = None
         blk = FieldBlock()
         self.limited = blk.scalar(ti.i32, max(model.capacity[1], 1))
         self.dx = blk.vector(3, model.fp, model.capacity[0])
@@ -86,7 +90,8 @@ class StretchLimit(Controller):
     name = "stretch_limit"
 
     def after_step(self, t: float, dt: float) -> None:
-        self.apply(dt)
+        if self.after_join or self.sewing is None or not self.sewing.joined:
+            self.apply(dt)
 
     def model_changed(self, change, t: float, dt: float) -> None:
         if change.refills:

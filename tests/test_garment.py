@@ -111,6 +111,24 @@ def test_a_stiffer_fabric_sews_as_fast_because_its_seams_pull_harder():
     assert closed[1.0] <= 0.6 and abs(closed[8.0] - closed[1.0]) <= 2 / 60 + 1e-9, closed
 
 
+@pytest.mark.parametrize("after_join", [True, False])
+def test_a_stretch_limit_not_after_the_join_holds_the_pieces_while_they_are_sewn_only(after_join):
+    """[stretch_limit] after_join = false: the limit works while the seams close (its pass count grows) and stops at
+    the join (the count stays); by default it goes on."""
+    g = build_garment(two_squares())
+    scene = tc.Scene(g, integrator="implicit", dt=1 / 240, gravity=(0, 0, 0),
+                     stretch_limit=dict(max_strain=0.01, after_join=after_join), sewing=dict(close_speed=0.5))
+    limit, sewing = scene.controller("stretch_limit"), scene.controller("sewing")
+    while not sewing.joined:
+        scene.run(1, progress=False)
+        assert scene.state.t < 0.8
+    at_join = limit.stats["stretch_passes"]
+    assert at_join > 0  # a 1 % limit works while the pieces are pulled together
+    scene.forces.set_gravity((0, -9.81, 0))  # a load the limit would have to hold
+    scene.run(12, progress=False)
+    assert (limit.stats["stretch_passes"] > at_join) is after_join
+
+
 def test_two_squares_close_below_epsilon_and_stay_below_the_stretch_limit():
     g = build_garment(two_squares())
     scene = tc.Scene(g, integrator="implicit", dt=1 / 240, gravity=(0, 0, 0), stretch_limit=dict(max_strain=0.1),
