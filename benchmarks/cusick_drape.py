@@ -23,7 +23,7 @@ import numpy as np
 from benchmarks import output_folder, write_csv
 from taichi_cloth import runtime
 from taichi_cloth.fabrics import (CUSICK_PEDESTAL, CUSICK_SPECIMEN, DC_RANGES, FABRICS, calibrate_bend,
-                                  cusick_drape)
+                                  cantilever_angle, cusick_drape)
 from taichi_cloth.material import MATERIALS
 
 
@@ -37,7 +37,6 @@ def calibrate(spacings, names, out) -> int:
             t0 = time.perf_counter()
             bend, tries = calibrate_bend(f, h)
             best = min(tries, key=lambda bt: abs(bt[0] - bend))[1]
-            from taichi_cloth.fabrics import cantilever_angle
             target = cantilever_angle(best.overhang / f.bending_length)
             row = dict(fabric=name, spacing=h, bending_length=f.bending_length, rigidity=f.rigidity, bend=bend,
                        overhang=best.overhang, angle=best.angle, target_angle=target,

@@ -23,6 +23,9 @@ import shutil
 import sys
 from pathlib import Path
 
+from taichi_cloth.batch.table import read_table
+from taichi_cloth.cli import main as cli
+
 ROOT = Path(__file__).resolve().parents[1]
 SPECS = {"draft": ROOT / "demos" / "batch" / "garment_matrix.toml",
          "fit": ROOT / "demos" / "batch" / "garment_matrix_fit.toml"}
@@ -80,9 +83,6 @@ def main(argv=None) -> int:
     ap.add_argument("--workers", type=int, default=None, help="jobs at once (default: this machine's cores)")
     ap.add_argument("--out", default="out/bench/garment_matrix", help="where the table goes")
     args = ap.parse_args(argv)
-    from taichi_cloth.batch.table import read_table
-    from taichi_cloth.cli import main as cli
-
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     parts = []

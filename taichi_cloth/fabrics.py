@@ -20,7 +20,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .cloth import mesh_cloth
+from .garment.mesh import mesh_piece
+from .garment.pattern import PatternPiece
 from .material import Material
+from .perturb import perturb_start
+from .scene import Scene
 
 #: standard gravity [m/s^2] (the gram-force)
 G0 = 9.80665
@@ -132,7 +137,6 @@ CUSICK_PEDESTAL = 0.18
 
 def disk_piece(diameter: float, name: str = "disk"):
     """A circular PatternPiece of `diameter` [m] centred on the origin: four exact quarter arcs."""
-    from .garment.pattern import PatternPiece
     r, b = 0.5 * diameter, math.tan(math.pi / 8.0)  # bulge = tan(sweep / 4)
     return PatternPiece.from_corners(name, [{"at": [r, 0.0], "bulge": b}, {"at": [0.0, r], "bulge": b},
                                             {"at": [-r, 0.0], "bulge": b}, {"at": [0.0, -r], "bulge": b}])
@@ -140,7 +144,6 @@ def disk_piece(diameter: float, name: str = "disk"):
 
 def disk_mesh(diameter: float, spacing: float) -> tuple[np.ndarray, np.ndarray]:
     """(uv (n,2) [m], triangles (t,3)) of a disk meshed by the garment mesher at `spacing` [m]."""
-    from .garment.mesh import mesh_piece
     m = mesh_piece(disk_piece(diameter), spacing)
     return m.uv, m.triangles
 
@@ -272,10 +275,6 @@ def simulate_cantilever(material: Material, spacing: float, overhang: float, wid
     overhanging by `overhang` [m], settles under gravity with the garment scenes' implicit settings (dt 1/120 s, CG
     tolerance 1e-3, air damping 1/s) until at rest (the scenes' rest criterion, at most `max_time` [s]). The tip is
     the mean of the particles at the free end."""
-    from .cloth import mesh_cloth
-    from .garment.mesh import mesh_piece
-    from .garment.pattern import PatternPiece
-    from .scene import Scene
     width = max(width, 2.0 * spacing)
     ledge = 2.0 * spacing
     piece = PatternPiece.from_polygon("strip", [[-ledge, 0.0], [overhang, 0.0], [overhang, width], [-ledge, width]])
@@ -363,8 +362,6 @@ def cusick_scene(material: Material, spacing: float, height: float = 1.0, **opti
     at `spacing` [m], flat at `height` [m] in the xz plane, the particles within the 18 cm clamp (r <= 9 cm) held, the
     rest free, with the garment scenes' settings (implicit, dt 1/120 s, CG tolerance 1e-3, air damping 1/s, stretch
     limit 10 %, 20 iterations) and the rest criterion ending the run; `options` override Scene options."""
-    from .cloth import mesh_cloth
-    from .scene import Scene
     uv, tri = disk_mesh(CUSICK_SPECIMEN, spacing)
     x0 = np.c_[uv[:, 0], np.full(len(uv), height), uv[:, 1]]
     cloth = mesh_cloth(x0, tri, material, source="cusick disk", stiffness_rule="isotropic")
@@ -388,7 +385,6 @@ def cusick_drape(material: Material, spacing: float, max_time: float = 10.0, per
     """Run the Cusick test (cusick_scene) until at rest or `max_time` [s]; with `perturb` [m] > 0, the free
     particles' start moved first by that much (taichi_cloth.perturb, `seed`). The DC's specimen area is the meshed
     disk's own flat area, so a disk that does not drape at all gives DC = 1 up to the rasterisation (cell [m])."""
-    from .perturb import perturb_start
     scene, tri, flat = cusick_scene(material, spacing)
     if perturb > 0:
         perturb_start(scene, perturb, seed)

@@ -21,6 +21,7 @@ with warnings.catch_warnings():  # Starlette 1.10 prefers httpx2 to httpx for it
     from starlette.testclient import TestClient
 
 from taichi_cloth.garment.garment import build_garment  # noqa: E402
+from taichi_cloth.material import MATERIALS  # noqa: E402
 from taichi_cloth.garment.garmentfile import load_garment  # noqa: E402
 from taichi_cloth.studio.server import MAX_UPLOAD, create_app  # noqa: E402
 from taichi_cloth.studio.session import AUTOSAVE, PREVIOUS  # noqa: E402
@@ -192,9 +193,10 @@ def test_placement_material_and_spacing(folder):
     png = c.get("/api/views/placement.png")
     assert png.status_code == 200 and png.content[:8] == b"\x89PNG\r\n\x1a\n"
 
-    state = ok(c.put("/api/material", json={"preset": "denim", "values": {"density": 0.5, "stretch": 8000.0}}))["state"]
+    denim = MATERIALS["denim"].stretch  # a value equal to the preset's is no override
+    state = ok(c.put("/api/material", json={"preset": "denim", "values": {"density": 0.5, "stretch": denim}}))["state"]
     assert state["material"]["preset"] == "denim" and state["material"]["overrides"] == {"density": 0.5}
-    assert state["material"]["values"]["stretch"] == 8000.0
+    assert state["material"]["values"]["stretch"] == denim
     assert c.put("/api/material", json={"preset": "tweed"}).status_code == 400
     assert c.put("/api/material", json={"preset": "silk", "values": {"density": -1}}).status_code == 400
 

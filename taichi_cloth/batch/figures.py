@@ -18,6 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import MeshError, TaichiClothError
+from ..garment.ease import scene_too_small, too_small_message
 from ..garment.metrics import garment_quality
 
 #: the girths whose gap to the garment a row reports
@@ -60,7 +61,6 @@ def seams_open_status(scene, reason: str) -> tuple[str, str]:
     before `reason` (the open seams) where the garment is too small for the body (ease.scene_too_small), else
     SEAMS_OPEN with `reason`. A check that cannot measure this body (not a morph of the mannequin, and no girths
     found on it) leaves SEAMS_OPEN."""
-    from ..garment.ease import scene_too_small, too_small_message
 
     try:
         small = scene_too_small(scene)
