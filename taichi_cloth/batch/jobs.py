@@ -61,9 +61,10 @@ class Job:
 def make_jobs(spec: BatchSpec) -> list[Job]:
     """The spec's jobs, in order: its [[jobs]] list, else every garment x material x body (garments outermost,
     bodies innermost; a garment that names its bodies only on those). Bodies vary fastest because the jobs running
-    at once then differ in their body: a garment on one body compiles the kernels whose fields the body sizes (the collision grid), and the job of the same
-    garment and body in the next material, started later, finds them in the offline cache the first one wrote at
-    its end (two jobs of one body started together would both compile them)."""
+    at once then differ in their body: a garment on one body compiles the kernels whose fields the body sizes (the
+    collision grid), and the job of the same garment and body in the next material, started later, finds them in
+    the offline cache the first one wrote at its end (two jobs of one body started together would both compile
+    them)."""
     combos = spec.jobs if spec.jobs is not None else [
         (g, b, m, {}) for g in spec.garments for m in spec.materials for b in spec.bodies
         if g.bodies is None or b.name in g.bodies]
