@@ -15,8 +15,8 @@ from pathlib import Path
 
 from . import runtime
 from .control import ModelChange
-from .errors import BlowUpError, MeshError, SceneError, TaichiClothError
-from .garment.ease import scene_too_small, too_small_message
+from .errors import BlowUpError, SceneError
+from .garment.ease import scene_too_small_message
 from .garment.metrics import garment_quality
 from .guards import check_run_length
 from .paths import free_stem
@@ -62,15 +62,6 @@ def _perturbation(args: argparse.Namespace) -> tuple[float | None, int]:
     if not math.isfinite(perturb) or perturb < 0:
         raise SceneError(f"--perturb must be a distance >= 0 m, got {perturb}")
     return float(perturb), 0 if seed is None else int(seed)
-
-
-def _too_small(scene) -> str:
-    """Why a garment's seams could not close, in garment terms ("too small: the hem is 104 cm and the hips 110
-    cm"), or "" where the garment is not too small or the body cannot be measured."""
-    try:
-        return too_small_message(scene_too_small(scene))
-    except (TaichiClothError, MeshError):
-        return ""
 
 
 def run_scene_file(source: str | Path | dict, args: argparse.Namespace, quiet: bool = False,
@@ -125,7 +116,7 @@ def run_scene_file(source: str | Path | dict, args: argparse.Namespace, quiet: b
                 summary.outputs += [str(p) for p in write_pictures(scene, out / stem)]
     sewing = scene.controller("sewing")
     if sewing is not None and sewing.gave_up:
-        small = _too_small(scene)
+        small = scene_too_small_message(scene)
         if small:
             summary.warnings.append(f"{small} (the garment at its stretch limit, the cloth at the body's collision "
                                     "thickness: taichi_cloth.garment.ease)")

@@ -17,8 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import MeshError, TaichiClothError
-from ..garment.ease import scene_too_small, too_small_message
+from ..garment.ease import scene_too_small_message
 from ..garment.metrics import garment_quality
 
 #: the girths whose gap to the garment a row reports
@@ -61,14 +60,10 @@ def seams_open_status(scene, reason: str) -> tuple[str, str]:
     before `reason` (the open seams) where the garment is too small for the body (ease.scene_too_small), else
     SEAMS_OPEN with `reason`. A check that cannot measure this body (not a morph of the mannequin, and no girths
     found on it) leaves SEAMS_OPEN."""
-
-    try:
-        small = scene_too_small(scene)
-    except (TaichiClothError, MeshError):
-        small = []
+    small = scene_too_small_message(scene)
     if not small:
         return SEAMS_OPEN, reason
-    return TOO_SMALL, "; ".join(x for x in (too_small_message(small), reason) if x)
+    return TOO_SMALL, "; ".join(x for x in (small, reason) if x)
 
 
 def finished_row(scene, summary, run: dict) -> dict:

@@ -42,6 +42,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from ..errors import MeshError, TaichiClothError
 from .garment import FreePlacement
 from .seams import route
 
@@ -364,3 +365,12 @@ def scene_too_small(scene, min_ease: float = 0.0) -> list[Ease]:
     """too_small of a garment scene (scene_girths: its stretch limit and its body's thickness)."""
     eases, stretch, clearance = scene_girths(scene)
     return too_small(eases, stretch, clearance, min_ease)
+
+
+def scene_too_small_message(scene) -> str:
+    """too_small_message of a garment scene: "" where the garment is not too small or its body cannot be measured
+    (not a morph of the mannequin, and no girths found on it)."""
+    try:
+        return too_small_message(scene_too_small(scene))
+    except (TaichiClothError, MeshError):
+        return ""
