@@ -9,7 +9,7 @@ import numpy as np
 
 from clothbase.meshes import load_triangle_mesh
 
-from .cloth import PLANES, ClothData, SpringKind, mesh_cloth, spring_arrays
+from .cloth import PLANES, ClothData, SpringKind, bend_springs, mesh_cloth, spring_arrays
 from .guards import check_grid
 from .material import Material
 from .material import material as as_material
@@ -29,7 +29,8 @@ class ClothBuilder:
         (taichi_cloth.guards.check_grid).
 
         Springs: structural on the quad edges, shear on both quad diagonals, bend between particles two
-        apart along u and v. Triangles split each quad along alternating diagonals (for normals/rendering).
+        apart along u and v (the quadratic energy on the triangles when the material's bending is "quadratic").
+        Triangles split each quad along alternating diagonals (for normals/rendering).
         """
         mat = as_material(material)
         nu, nv = int(resolution[0]), int(resolution[1])
@@ -68,16 +69,6 @@ class ClothBuilder:
         d1 = np.stack([idx[:-1, :-1].ravel(), idx[1:, 1:].ravel()], 1)
         d2 = np.stack([idx[:-1, 1:].ravel(), idx[1:, :-1].ravel()], 1)
         k_sh = mat.shear * 2 * du * dv / (du * du + dv * dv)
-        # bend: skip-one springs along u and v, k = bend / L0^2
-        b_u = np.stack([idx[:, :-2].ravel(), idx[:, 2:].ravel()], 1)
-        b_v = np.stack([idx[:-2, :].ravel(), idx[2:, :].ravel()], 1)
-        pairs = [h_pairs, v_pairs, d1, d2, b_u, b_v]
-        ks = [k_h, k_v, np.full(len(d1), k_sh), np.full(len(d2), k_sh),
-              np.full(len(b_u), mat.bend / (2 * du) ** 2), np.full(len(b_v), mat.bend / (2 * dv) ** 2)]
-        kinds = [SpringKind.STRUCTURAL, SpringKind.STRUCTURAL, SpringKind.SHEAR, SpringKind.SHEAR,
-                 SpringKind.BEND, SpringKind.BEND]
-        springs, rest, stiffness, damping, kind = spring_arrays(pairs, ks, kinds, positions, mat.damping)
-
         # triangles with alternating diagonals, consistently oriented (normal along +u x +v)
         c00, c10 = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel()
         c01, c11 = idx[1:, :-1].ravel(), idx[1:, 1:].ravel()
@@ -86,6 +77,21 @@ class ClothBuilder:
         t_odd = np.concatenate([np.stack([c00, c10, c01], 1), np.stack([c10, c11, c01], 1)])
         mask = np.concatenate([even, even])
         triangles = np.where(mask[:, None], t_even, t_odd)
+        # bend: skip-one springs along u and v, k = bend / L0^2; or the quadratic energy on the triangles
+        if mat.bending == "quadratic":
+            b_pairs, k_b, b_kind = bend_springs(triangles, positions, mat)
+            bends, bend_ks, bend_kinds = [b_pairs], [k_b], [b_kind]
+        else:
+            b_u = np.stack([idx[:, :-2].ravel(), idx[:, 2:].ravel()], 1)
+            b_v = np.stack([idx[:-2, :].ravel(), idx[2:, :].ravel()], 1)
+            bends = [b_u, b_v]
+            bend_ks = [np.full(len(b_u), mat.bend / (2 * du) ** 2), np.full(len(b_v), mat.bend / (2 * dv) ** 2)]
+            bend_kinds = [SpringKind.BEND, SpringKind.BEND]
+        pairs = [h_pairs, v_pairs, d1, d2] + bends
+        ks = [k_h, k_v, np.full(len(d1), k_sh), np.full(len(d2), k_sh)] + bend_ks
+        kinds = [SpringKind.STRUCTURAL, SpringKind.STRUCTURAL, SpringKind.SHEAR, SpringKind.SHEAR] + bend_kinds
+        springs, rest, stiffness, damping, kind = spring_arrays(pairs, ks, kinds, positions, mat.damping)
+
         return ClothData(positions, mass, springs, rest, stiffness, damping, kind, triangles, (nu, nv),
                          viscosity=mat.viscosity)
 

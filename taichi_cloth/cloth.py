@@ -14,6 +14,7 @@ import numpy as np
 
 from clothbase.meshes import edges_of, interior_edge_opposites, triangle_areas, validate_triangle_mesh
 
+from .bending import quadratic_bending
 from .material import Material
 from .material import material as as_material
 
@@ -28,6 +29,8 @@ class SpringKind(IntEnum):
     SHEAR = 1
     BEND = 2
     SEAM = 3
+    #: a pair term of the quadratic bending energy (taichi_cloth.bending): rest length 0, a constant of either sign
+    QUADRATIC_BEND = 4
 
 
 @dataclass
@@ -39,7 +42,8 @@ class ClothData:
     springs:     (S,2) int64        particle indices (a, b)
     rest_length: (S,)  float64 [m]
     stiffness:   (S,)  float64 [N/m]
-    damping:     (S,)  float64 [N*s/m]
+    damping:     (S,)  float64 [N*s/m]  stiffness-proportional: along the spring, isotropic on a QUADRATIC_BEND
+                                      pair (axial_damping, viscous_damping)
     kind:        (S,)  int64        SpringKind
     triangles:   (T,3) int64        for rendering, normals and wind (may be empty for a chain)
     grid_shape:  (nu, nv) for grids (particle i + nu*j), else None
@@ -68,18 +72,26 @@ class ClothData:
     def count(self, kind: SpringKind) -> int:
         return int(np.count_nonzero(self.kind == kind))
 
+    def axial_damping(self) -> np.ndarray:
+        """(S,) float64 [N*s/m]: each spring's damping along its direction: `damping`, 0 on a QUADRATIC_BEND pair
+        (whose direction is not a deformation's: its damping is the isotropic damping x K of viscous_damping)."""
+        return np.where(self.kind == SpringKind.QUADRATIC_BEND, 0.0, self.damping)
+
     def viscous_damping(self) -> np.ndarray:
         """(S,) float64 [N*s/m]: the isotropic dashpot c_s = viscosity * mu_s / L_s^2 of every mesh edge (structural
-        and shear springs; mu_s = m_a m_b / (m_a + m_b), L_s its rest length), 0 on bend and seam springs. It pulls
+        and shear springs; mu_s = m_a m_b / (m_a + m_b), L_s its rest length), 0 on bend and seam springs; on a
+        QUADRATIC_BEND pair its `damping` (ratio x k: the bending energy's Hessian times the ratio, Rayleigh
+        damping of the bending modes, 0 on a rigid motion). It pulls
         the velocities of neighbouring particles together (force c_s (v_b - v_a) on a), so a velocity difference
         between neighbours decays at the rate viscosity / L_s^2 whatever the spacing: a velocity pattern of wavelength
         lambda decays at about viscosity (2 pi / lambda)^2 (docs/algorithms.md, damping)."""
+        bending = np.where(self.kind == SpringKind.QUADRATIC_BEND, self.damping, 0.0)
         if self.viscosity == 0.0 or self.n_springs == 0:
-            return np.zeros(self.n_springs)
+            return bending
         ma, mb = self.mass[self.springs[:, 0]], self.mass[self.springs[:, 1]]
         mesh_edge = (self.kind == SpringKind.STRUCTURAL) | (self.kind == SpringKind.SHEAR)
-        return np.where(mesh_edge, self.viscosity * ma * mb / (ma + mb) / np.maximum(self.rest_length, 1e-12) ** 2,
-                        0.0)
+        return bending + np.where(mesh_edge, self.viscosity * ma * mb / (ma + mb)
+                                  / np.maximum(self.rest_length, 1e-12) ** 2, 0.0)
 
 
 def in_plane(uv: np.ndarray, plane: str, center=(0.0, 0.0, 0.0)) -> np.ndarray:
@@ -95,20 +107,35 @@ def in_plane(uv: np.ndarray, plane: str, center=(0.0, 0.0, 0.0)) -> np.ndarray:
 
 def spring_arrays(pairs: list[np.ndarray], ks: list[np.ndarray], kinds: list[int], positions, damping_ratio):
     """(springs (S,2), rest (S,) [m], stiffness (S,) [N/m], damping (S,) [N s/m], kind (S,)) of spring groups:
-    index pairs, their constants [N/m] and kinds; rest lengths from `positions` [m], damping = ratio [s] x k."""
-    springs = np.concatenate(pairs).astype(np.int64)
+    index pairs, their constants [N/m] and kinds; rest lengths from `positions` [m] (0 for QUADRATIC_BEND pairs),
+    damping = ratio [s] x k."""
+    springs = np.concatenate(pairs).astype(np.int64).reshape(-1, 2)
     stiffness = np.concatenate(ks).astype(np.float64)
     kind = np.concatenate([np.full(len(p), kd, np.int64) for p, kd in zip(pairs, kinds)])
     rest = np.linalg.norm(positions[springs[:, 1]] - positions[springs[:, 0]], axis=1)
+    rest[kind == SpringKind.QUADRATIC_BEND] = 0.0
     return springs, rest, stiffness, damping_ratio * stiffness, kind
+
+
+def bend_springs(triangles: np.ndarray, positions: np.ndarray, mat: Material):
+    """The bending springs of a triangle mesh at rest `positions` (P,3) [m] for the material's bending model:
+    (pairs (K,2) int64, constants (K,) [N/m], kind). "springs": one across every interior edge between its two
+    apexes, k = bend / L0^2; "quadratic": the pair terms of taichi_cloth.bending with B = bend."""
+    t = np.asarray(triangles, dtype=np.int64)
+    if mat.bending == "quadratic":
+        pairs, k = quadratic_bending(t, positions[t], mat.bend)
+        return pairs, k, SpringKind.QUADRATIC_BEND
+    pairs = interior_edge_opposites(t)
+    L = np.linalg.norm(positions[pairs[:, 1]] - positions[pairs[:, 0]], axis=1) if len(pairs) else np.zeros(0)
+    return pairs, mat.bend / np.maximum(L, 1e-12) ** 2, SpringKind.BEND
 
 
 def mesh_cloth(vertices, triangles, material: str | Material = "cotton", source: str = "mesh",
                   stiffness_rule: str = "edge-area") -> ClothData:
     """A cloth from any manifold triangle mesh (vertices (V,3) [m], triangles (T,3)).
 
-    Structural springs on every edge; bend springs across every interior edge between its two opposite
-    vertices with k = bend / L0^2; masses density * (adjacent area) / 3. No shear springs: the triangle
+    Structural springs on every edge; bending springs by the material's model (bend_springs: across every interior
+    edge between its two opposite vertices with k = bend / L0^2, or the quadratic energy's pairs); masses density * (adjacent area) / 3. No shear springs: the triangle
     edges already resist shear. The structural constant follows `stiffness_rule`:
       "edge-area": k = stretch * A_e / L0^2 (A_e = area of the triangles sharing the edge; Van Gelder);
       "isotropic": k = sum over the edge's triangles t of 3 E A_t / (sum of t's squared edge lengths),
@@ -139,9 +166,7 @@ def mesh_cloth(vertices, triangles, material: str | Material = "cotton", source:
         np.add.at(k_edge, face_edge.reshape(-1), np.repeat(per_triangle, 3))
     else:
         raise ValueError(f"stiffness_rule must be 'edge-area' or 'isotropic', got {stiffness_rule!r}")
-    bend_pairs = interior_edge_opposites(t)
-    Lb = np.linalg.norm(v[bend_pairs[:, 1]] - v[bend_pairs[:, 0]], axis=1) if len(bend_pairs) else np.zeros(0)
+    bend_pairs, k_bend, bend_kind = bend_springs(t, v, mat)
     springs, rest, stiffness, damping, kind = spring_arrays(
-        [edges, bend_pairs], [k_edge, mat.bend / np.maximum(Lb, 1e-12) ** 2],
-        [SpringKind.STRUCTURAL, SpringKind.BEND], v, mat.damping)
+        [edges, bend_pairs], [k_edge, k_bend], [SpringKind.STRUCTURAL, bend_kind], v, mat.damping)
     return ClothData(v, mass, springs, rest, stiffness, damping, kind, t, viscosity=mat.viscosity)

@@ -6,13 +6,19 @@ uniform mesh keeps the same sheet response (docs/algorithms.md, materials):
 
 - structural spring:  k = stretch * (attributed width / rest length)   -> `stretch` on a square grid
 - shear (diagonal):   k = shear * 2 * cell area / rest length^2         -> `shear` on a square grid
-- bend (skip-one):    k = bend / rest length^2                          (approximation)
+- bend (skip-one):    k = bend / rest length^2                          (approximation; bending = "springs")
+- bend (quadratic):   the bending rigidity B of Bergou et al.'s hinge energy (bending = "quadratic";
+                      taichi_cloth.bending): a measured rigidity is used as it is
 - every spring:       damping coefficient kd = damping * k              (stiffness-proportional)
 """
 from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
+
+
+#: the bending models a Material can name (Material.bending)
+BENDING_MODELS = ("springs", "quadratic")
 
 
 @dataclass(frozen=True)
@@ -22,11 +28,15 @@ class Material:
     density: areal mass density [kg/m^2] (cotton shirting ~0.12).
     stretch: in-plane stretch modulus [N/m]; the structural spring constant on a square grid.
     shear:   in-plane shear modulus [N/m]; the diagonal spring constant on a square grid.
-    bend:    bending coefficient [N*m]; a bend spring of rest length L gets k = bend / L^2.
+    bend:    bending coefficient [N*m]: with bending = "springs" a bend spring of rest length L gets k = bend / L^2;
+             with bending = "quadratic" it is the bending rigidity B (a cylindrical bend of curvature kappa holds
+             B / 2 kappa^2 per unit area; KES-F's B x 9.807e-5).
     damping: stiffness-proportional spring damping [s]; a spring of constant k gets kd = damping * k [N*s/m].
     viscosity: internal (membrane) viscosity [m^2/s]: neighbouring particles' velocities are pulled together
              (ClothData.viscous_damping), so a sway or a wrinkle of wavelength lambda loses its speed at about
              viscosity * (2 pi / lambda)^2 per second, while a rigid motion and the rest shape are untouched.
+    bending: the bending model, "springs" (across every hinge, resisting a bend of angle theta with a force of
+             order theta^2) or "quadratic" (Bergou et al. 2006: linear in the positions, first order in theta).
     """
 
     density: float
@@ -35,9 +45,14 @@ class Material:
     bend: float
     damping: float = 0.0
     viscosity: float = 0.0
+    bending: str = "springs"
 
     def __post_init__(self):
+        if self.bending not in BENDING_MODELS:
+            raise ValueError(f"material bending must be one of {', '.join(BENDING_MODELS)}, got {self.bending!r}")
         for f in dataclasses.fields(self):
+            if f.name == "bending":
+                continue
             v = getattr(self, f.name)
             if not isinstance(v, (int, float)) or v != v:
                 raise ValueError(f"material {f.name} must be a number, got {v!r}")

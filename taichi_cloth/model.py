@@ -114,7 +114,7 @@ class Model:
         fill_prefix(self.spring_b, b.astype(np.int32))
         fill_prefix(self.rest_length, data.rest_length.astype(npfp))
         fill_prefix(self.stiffness, data.stiffness.astype(npfp))
-        fill_prefix(self.damping, data.damping.astype(npfp))
+        fill_prefix(self.damping, data.axial_damping().astype(npfp))
         fill_prefix(self.viscous, data.viscous_damping().astype(npfp))
         fill_prefix(self.spring_kind, data.kind.astype(np.int32))
         fill_prefix(self.stiffness_sum, self.stiffness_sum_np().astype(npfp))
@@ -145,12 +145,13 @@ class Model:
         The damping coefficients keep their ratio kd/k."""
         k_old = self.data.stiffness
         k = np.broadcast_to(np.asarray(stiffness, dtype=np.float64), k_old.shape).copy()
-        ratio = np.divide(self.data.damping, k_old, out=np.zeros_like(k_old), where=k_old > 0)
+        ratio = np.divide(self.data.damping, k_old, out=np.zeros_like(k_old), where=k_old != 0)
         self.data.stiffness, self.data.damping = k, ratio * k
         self._omega = None
         fill_prefix(self.stiffness, k.astype(self.np_dtype))
         fill_prefix(self.stiffness_sum, self.stiffness_sum_np().astype(self.np_dtype))
-        fill_prefix(self.damping, self.data.damping.astype(self.np_dtype))
+        fill_prefix(self.damping, self.data.axial_damping().astype(self.np_dtype))
+        fill_prefix(self.viscous, self.data.viscous_damping().astype(self.np_dtype))
 
     def set_mass(self, mass) -> None:
         """Replace the particle masses [kg] (scalar or (P,)); pins are kept."""
@@ -193,8 +194,8 @@ class Model:
     def damping_ratio_max(self) -> float:
         """max over springs of (kd + c)/k [s]: the stiffness-proportional damping, with the viscous dashpot c of a
         mesh edge (ClothData.viscous_damping) counted as more of it, which bounds the explicit steps alike."""
-        k, kd = self.data.stiffness, self.data.damping + self.data.viscous_damping()
-        r = np.divide(kd, k, out=np.zeros_like(k), where=k > 0)
+        k, kd = self.data.stiffness, self.data.axial_damping() + self.data.viscous_damping()
+        r = np.divide(kd, k, out=np.zeros_like(k), where=k != 0)
         return float(r.max()) if len(r) else 0.0
 
 

@@ -23,7 +23,7 @@ and a component whose table is absent is never built. The schema (units in brack
     plane = "xy"                  # "xy" (hanging), "xz" (horizontal), "yz", "zy"
     # [cloth.mesh] path = "flag.obj", scale = 1.0, translate = [0, 0, 0]
     # [cloth.material] preset = "cotton", density [kg/m^2], stretch [N/m], shear [N/m], bend [N m], damping [s],
-    #                   viscosity [m^2/s]
+    #                   viscosity [m^2/s], bending = "springs" | "quadratic" (bend is then the rigidity B)
 
     [integrator]
     name = "approx-implicit"      # explicit | verlet | central-difference | approx-implicit | implicit

@@ -33,8 +33,9 @@ OMEGA_MARGIN = 0.01
 
 
 def stiffness_sum(data) -> np.ndarray:
-    """(P,) sum of the spring constants at each particle of a ClothData [N/m]."""
-    return np.bincount(data.springs.reshape(-1), np.repeat(data.stiffness, 2), minlength=data.n_particles)
+    """(P,) sum of the spring constants' magnitudes at each particle of a ClothData [N/m] (a quadratic bending
+    pair's constant may be negative: the Gershgorin bound counts |k|)."""
+    return np.bincount(data.springs.reshape(-1), np.repeat(np.abs(data.stiffness), 2), minlength=data.n_particles)
 
 
 def omega_max_bound(data, pinned: np.ndarray) -> float:

@@ -37,6 +37,7 @@ import taichi as ti
 from clothbase.fields import FieldBlock
 from clothbase.meshes import connected_components, edges_of, rows_in
 
+from ..bending import quadratic_bending
 from ..cloth import ClothData, SpringKind
 from ..control import Controller, FrameInfo, ModelChange
 
@@ -338,7 +339,7 @@ def merge_seams(data: ClothData, garment, x: np.ndarray, v: np.ndarray):
     """Merge every seam pair of `garment` into one particle (connected components: a corner on two seams merges
     with all its partners). Mass adds up; position and velocity are mass-weighted means (momentum is conserved).
     Seam springs go; springs whose ends merged go; new bend springs span every seam edge, with the rest length
-    of the two pattern triangles unfolded flat. Returns (ClothData, x, v, current_of (P0,) int64)."""
+    of the two pattern triangles unfolded flat (with quadratic bending, its pairs are rebuilt on the merged mesh). Returns (ClothData, x, v, current_of (P0,) int64)."""
     roots = connected_components(data.n_particles, garment.seam_pairs)
     _, current_of = np.unique(roots, return_inverse=True)
     n = int(current_of.max()) + 1
@@ -353,17 +354,28 @@ def merge_seams(data: ClothData, garment, x: np.ndarray, v: np.ndarray):
     rest, k, kd, kind = (arr[keep][alive] for arr in (data.rest_length, data.stiffness, data.damping, data.kind))
     tris = current_of[data.triangles]
 
-    # bend springs across the new (seam) edges: the hinges of the merged mesh not bent before
-    pairs, L0 = hinges(tris, garment.rest_uv()[data.triangles])
-    bent = np.sort(springs[kind == int(SpringKind.BEND)], axis=1)
-    new = ~rows_in(pairs, bent)
+    mat = garment.material
+    if mat.bending == "quadratic":
+        # the quadratic energy is a sum over hinges whose pairs the merge joined: rebuilt on the merged mesh from
+        # the pattern triangles (across a seam, the two pieces' triangles unfolded flat)
+        bending = kind == int(SpringKind.QUADRATIC_BEND)
+        springs, rest, k, kd, kind = (arr[~bending] for arr in (springs, rest, k, kd, kind))
+        pairs, kb = quadratic_bending(tris, garment.rest_uv()[data.triangles], mat.bend)
+        new = np.ones(len(pairs), bool)
+        L0, kind_new = np.zeros(len(pairs)), SpringKind.QUADRATIC_BEND
+    else:
+        # bend springs across the new (seam) edges: the hinges of the merged mesh not bent before
+        pairs, L0 = hinges(tris, garment.rest_uv()[data.triangles])
+        bent = np.sort(springs[kind == int(SpringKind.BEND)], axis=1)
+        new = ~rows_in(pairs, bent)
+        kb = mat.bend / np.maximum(L0, 1e-9) ** 2
+        kind_new = SpringKind.BEND
     if new.any():
-        kb = garment.material.bend / np.maximum(L0[new], 1e-9) ** 2
         springs = np.concatenate([springs, pairs[new]])
         rest = np.concatenate([rest, L0[new]])
-        k = np.concatenate([k, kb])
-        kd = np.concatenate([kd, garment.material.damping * kb])
-        kind = np.concatenate([kind, np.full(int(new.sum()), int(SpringKind.BEND), np.int64)])
+        k = np.concatenate([k, kb[new]])
+        kd = np.concatenate([kd, mat.damping * kb[new]])
+        kind = np.concatenate([kind, np.full(int(new.sum()), int(kind_new), np.int64)])
     merged = ClothData(mx, mass, springs, rest, k, kd, kind, tris, viscosity=data.viscosity)
     return merged, mx, mv, current_of
 

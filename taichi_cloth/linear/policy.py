@@ -116,7 +116,7 @@ class PreconditionerPolicy:
         """Raises ValueError when the levels are not nested or the coarsest is too large."""
         d = nested.cloth
         return SpringMultigrid(
-            nested.hierarchy, [c.springs for c in d], [c.stiffness for c in d], [c.damping for c in d],
+            nested.hierarchy, [c.springs for c in d], [c.stiffness for c in d], [c.axial_damping() for c in d],
             [c.rest_length for c in d], [c.mass for c in d], fp=self.model.fp, viscous=[c.viscous_damping() for c in d],
             # every loop serial for a cloth the CPU runs serially; on a GPU none (the CPU's threshold would run
             # every loop in one GPU thread)
