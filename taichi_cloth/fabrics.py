@@ -282,7 +282,7 @@ def simulate_cantilever(material: Material, spacing: float, overhang: float, wid
     uv, tri = m.uv, m.triangles
     height = 1.0
     x0 = np.c_[uv[:, 0], np.full(len(uv), height), uv[:, 1]]
-    cloth = mesh_cloth(x0, tri, material, source="cantilever", stiffness_rule="isotropic")
+    cloth = mesh_cloth(x0, tri, material, source="cantilever", stiffness_rule="isotropic", uv=uv)
     held = np.nonzero(uv[:, 0] <= 1e-9)[0]
     tip = np.nonzero(uv[:, 0] >= overhang - 1e-9)[0]
     scene = Scene(cloth, integrator="implicit", dt=1.0 / 120.0, integrator_options={"cg_tolerance": 1e-3},
@@ -364,7 +364,7 @@ def cusick_scene(material: Material, spacing: float, height: float = 1.0, **opti
     limit 10 %, 20 iterations) and the rest criterion ending the run; `options` override Scene options."""
     uv, tri = disk_mesh(CUSICK_SPECIMEN, spacing)
     x0 = np.c_[uv[:, 0], np.full(len(uv), height), uv[:, 1]]
-    cloth = mesh_cloth(x0, tri, material, source="cusick disk", stiffness_rule="isotropic")
+    cloth = mesh_cloth(x0, tri, material, source="cusick disk", stiffness_rule="isotropic", uv=uv)
     held = np.nonzero(np.hypot(uv[:, 0], uv[:, 1]) <= 0.5 * CUSICK_PEDESTAL + 1e-9)[0]
     settings = dict(integrator="implicit", dt=1.0 / 120.0, integrator_options={"cg_tolerance": 1e-3},
                     air_damping=1.0, stretch_limit={"max_strain": 0.1, "iterations": 20},

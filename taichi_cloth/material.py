@@ -19,6 +19,8 @@ from dataclasses import dataclass
 
 #: the bending models a Material can name (Material.bending)
 BENDING_MODELS = ("springs", "quadratic")
+#: the membranes a triangle mesh of the material can have (Material.membrane; grids are always the square grid's)
+MEMBRANE_MODELS = ("isotropic", "orthotropic")
 
 
 @dataclass(frozen=True)
@@ -37,6 +39,10 @@ class Material:
              viscosity * (2 pi / lambda)^2 per second, while a rigid motion and the rest shape are untouched.
     bending: the bending model, "springs" (across every hinge, resisting a bend of angle theta with a force of
              order theta^2) or "quadratic" (Bergou et al. 2006: linear in the positions, first order in theta).
+    membrane: a triangle mesh's in-plane springs (taichi_cloth.cloth.mesh_cloth, the "isotropic" rule of the
+             garments, 4-8 levels and drape tests): "isotropic" (Young's modulus sheet_modulus, Poisson 1/3, so the
+             shear modulus is 3/8 of it whatever `shear` says) or "orthotropic" (the square grid's sheet along the
+             pattern's axes: `stretch` along warp and weft, `shear` on the bias, as a woven fabric).
     """
 
     density: float
@@ -46,12 +52,15 @@ class Material:
     damping: float = 0.0
     viscosity: float = 0.0
     bending: str = "springs"
+    membrane: str = "isotropic"
 
     def __post_init__(self):
         if self.bending not in BENDING_MODELS:
             raise ValueError(f"material bending must be one of {', '.join(BENDING_MODELS)}, got {self.bending!r}")
+        if self.membrane not in MEMBRANE_MODELS:
+            raise ValueError(f"material membrane must be one of {', '.join(MEMBRANE_MODELS)}, got {self.membrane!r}")
         for f in dataclasses.fields(self):
-            if f.name == "bending":
+            if f.name in ("bending", "membrane"):
                 continue
             v = getattr(self, f.name)
             if not isinstance(v, (int, float)) or v != v:

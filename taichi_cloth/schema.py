@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 from .errors import SceneError
-from .material import BENDING_MODELS, MATERIALS, Material
+from .material import BENDING_MODELS, MATERIALS, MEMBRANE_MODELS, Material
 from .material import material as preset
 
 MISSING = object()  # a Field default that makes the key required
@@ -105,7 +105,8 @@ MATERIAL_TABLE = Table({"preset": Field("str", None, choices=tuple(MATERIALS)),
                         "density": Field("number", None, positive), "stretch": Field("number", None, nonneg),
                         "shear": Field("number", None, nonneg), "bend": Field("number", None, nonneg),
                         "damping": Field("number", None, nonneg), "viscosity": Field("number", None, nonneg),
-                        "bending": Field("str", None, choices=BENDING_MODELS)},
+                        "bending": Field("str", None, choices=BENDING_MODELS),
+                        "membrane": Field("str", None, choices=MEMBRANE_MODELS)},
                        allow_string=Field("str", choices=tuple(MATERIALS)))
 
 
