@@ -202,6 +202,30 @@ bodies = ["mannequin", {{ name = "S60", waist = 60, hips = 88 }}, {{ name = "T80
                       "top_T80_denim"]
 
 
+def test_moved_starts_run_each_job_once_per_seed_and_the_worker_moves_its_start(tmp_path, monkeypatch):
+    """[run] perturb and seeds (the garment matrix's rest margins): a job per seed, each its own key and label, the
+    worker handing the distance and the seed to the run (taichi_cloth.perturb); without perturb the keys are the
+    plain batch's (its finished jobs are not run again)."""
+    from taichi_cloth.batch import worker
+
+    body = f'garments = ["{GARMENTS / "skirt.toml"}"]\nmaterials = ["silk"]\n'
+    plain = make_jobs(load_spec(write_spec(tmp_path, body, "plain.toml"), tmp_path / "out"))
+    moved = make_jobs(load_spec(write_spec(tmp_path, body + "[run]\nperturb = 1e-7\nseeds = [1, 2, 3]\n",
+                                           "moved.toml"), tmp_path / "out"))
+    assert [j.label for j in plain] == ["skirt_mannequin_silk"]
+    assert [j.label for j in moved] == [f"skirt_mannequin_silk_seed{k}" for k in (1, 2, 3)]
+    assert len({j.key for j in moved} | {plain[0].key}) == 4
+    assert [(j.run["perturb"], j.run["seed"]) for j in moved] == [(1e-7, 1), (1e-7, 2), (1e-7, 3)]
+    assert "perturb" not in plain[0].run
+    seen = []
+    monkeypatch.setattr(worker, "run_scene_file", lambda scene, args, **kw: seen.append((args.perturb, args.seed))
+                        or (_ for _ in ()).throw(OSError("stop here")))
+    assert worker.execute(moved[1].as_dict())["status"] == ERROR
+    assert seen == [(1e-7, 2)]
+    with pytest.raises(BatchError, match="seeds .*nothing to seed without perturb"):
+        make_jobs(load_spec(write_spec(tmp_path, body + "[run]\nseeds = [1]\n", "bad.toml"), tmp_path / "out"))
+
+
 @pytest.mark.parametrize("text, message", [
     ("garments = []", "garments: must be a non-empty list"),
     ('garments = ["nowhere.toml"]', "garments #1: "),

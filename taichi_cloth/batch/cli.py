@@ -3,6 +3,7 @@ machine's cores (the process pool) or on a Ray cluster; a results table, a conta
 (docs/batch.md). Rerunning the same command skips the jobs already finished."""
 from __future__ import annotations
 
+import math
 import os
 import sys
 from pathlib import Path
@@ -14,7 +15,7 @@ from .jobs import make_jobs
 from .pool import ProcessPool
 from .schedule import Progress, run_jobs
 from .sheet import SHEET, write_sheet
-from .spec import load_spec
+from .spec import BatchError, load_spec
 from .table import write_table
 from .worker import read_row, write_row
 
@@ -35,11 +36,22 @@ def add_parser(sub) -> None:
     p.add_argument("--retry-failed", action="store_true",
                    help="run again the jobs whose earlier row is not ok (by default every job with a row is done)")
     p.add_argument("--list", action="store_true", help="list the jobs, their keys and whether each is done; run none")
+    p.add_argument("--perturb", type=float, metavar="METRES",
+                   help="move every job's start by this much in random directions ([run] perturb)")
+    p.add_argument("--seeds", type=int, nargs="+", metavar="N",
+                   help="with --perturb: run each job once per seed, its label ending _seedN ([run] seeds)")
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
     spec = load_spec(args.spec, args.out)
+    perturb, seeds = getattr(args, "perturb", None), getattr(args, "seeds", None)
+    if perturb is not None:
+        if not math.isfinite(perturb) or perturb < 0:
+            raise BatchError(f"--perturb must be a distance >= 0 m, got {perturb}")
+        spec.run["perturb"] = perturb
+    if seeds:
+        spec.run["seeds"] = list(seeds)
     jobs = make_jobs(spec)
     check_output_folder(spec.out)
     rows, todo = {}, []

@@ -68,7 +68,13 @@ def make_jobs(spec: BatchSpec) -> list[Job]:
     combos = spec.jobs if spec.jobs is not None else [
         (g, b, m, {}) for g in spec.garments for m in spec.materials for b in spec.bodies
         if g.bodies is None or b.name in g.bodies]
-    jobs = [make_job(spec, g, b, m, dict(spec.run, **overrides)) for g, b, m, overrides in combos]
+    jobs = []
+    for g, b, m, overrides in combos:
+        run = dict(spec.run, **overrides)
+        if run.get("seeds") is not None and run.get("perturb") is None:
+            raise BatchError(f"{spec.path}: [run] seeds {run['seeds']}: nothing to seed without perturb (metres)")
+        seeds = run.get("seeds") or ([0] if run.get("perturb") is not None else [None])
+        jobs += [make_job(spec, g, b, m, dict(run, seed=seed)) for seed in seeds]
     for job in jobs:  # a mistake in [run] (an integrator option, a rest key) fails here, once, not in every job
         parse_scene(job.scene, Path(job.base_dir), label=f"{spec.path}: [run] (job {job.label})")
     seen = {}
@@ -80,7 +86,9 @@ def make_jobs(spec: BatchSpec) -> list[Job]:
 
 
 def make_job(spec: BatchSpec, garment, body, material, run: dict) -> Job:
-    label = f"{garment.name}_{body.name}_{material.name}"
+    seed = run.get("seed")
+    label = f"{garment.name}_{body.name}_{material.name}" + ("" if seed is None or run.get("seeds") is None
+                                                            else f"_seed{seed}")
     if run["scene"] is not None:
         template_path = Path(run["scene"])
         template_path = template_path if template_path.is_absolute() else spec.path.parent / template_path
@@ -108,6 +116,8 @@ def make_job(spec: BatchSpec, garment, body, material, run: dict) -> Job:
     if run.get("rest"):
         scene["rest"] = dict(scene.get("rest", {}), **run["rest"])
     settings = {k: run[k] for k in ("until_rest", "max_inside", "png", "record", "timeout")}
+    if run.get("perturb") is not None:  # the start moved (taichi_cloth.perturb): part of the job's key
+        settings.update(perturb=float(run["perturb"]), seed=int(seed or 0))
     files = [garment.path, *_garment_files(garment.path)]
     hashed = dict(scene, cloth=dict(cloth, garment=garment.path.name))  # the file by its bytes, not where it lies
     digest = hashlib.sha256(json.dumps({"scene": hashed, "template": _hash_bytes(template_bytes),

@@ -20,6 +20,9 @@
     max_inside = 0                             # particles inside the body a fit may leave, else "inside the body"
     png = true                                 # each job's still picture (and the contact sheet)
     record = false                             # each job's Rerun recording
+    # perturb = 1e-7                           # [m]: every particle's start moved by this much, in random
+    # seeds = [1, 2, 3]                        #   directions of each seed: each job once per seed (a figure that
+                                               #   holds over moved starts is a margin, not luck)
     # integrator = { cg_tolerance = 1e-3 }     # merged into the scene's [integrator]
     # rest = { max_speed = 0.005 }             # merged into the scene's [rest]
 
@@ -44,7 +47,7 @@ from ..errors import PatternError, TaichiClothError
 from ..garment.garment import RESOLUTIONS
 from ..garment.garmentfile import load_garment
 from ..quality import QUALITIES
-from ..schema import MATERIAL_TABLE, Field, Table, Validator, at_least, positive, read_toml
+from ..schema import MATERIAL_TABLE, Field, Table, Validator, at_least, nonneg, positive, read_toml
 from ..scenefile import BODY_GIRTHS
 
 
@@ -64,6 +67,8 @@ RUN_TABLE = Table({
     "max_inside": Field("int", 0, at_least(0)),
     "png": Field("bool", True),
     "record": Field("bool", False),
+    "perturb": Field("number", None, nonneg),
+    "seeds": Field("ints", None),
     "integrator": Table({}, extra=True),
     "rest": Table({}, extra=True),
 }, always=True)

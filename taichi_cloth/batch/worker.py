@@ -63,7 +63,8 @@ def execute(job: dict, attempt: int = 1) -> dict:
            "attempts": attempt, "worker": f"{socket.gethostname()}:{os.getpid()}",
            "started": time.strftime("%Y-%m-%dT%H:%M:%S")}
     run = job["run"]
-    args = argparse.Namespace(out=None, until_rest=run["until_rest"], png=run["png"], no_progress=True, yes=True)
+    args = argparse.Namespace(out=None, until_rest=run["until_rest"], png=run["png"], no_progress=True, yes=True,
+                              perturb=run.get("perturb"), seed=run.get("seed"))
     summary = None
     try:
         _inject(job, attempt)
