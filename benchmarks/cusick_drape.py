@@ -7,9 +7,13 @@ moved by 1e-7 m (taichi_cloth.perturb).
 
     .venv/bin/python -m benchmarks.cusick_drape [--spacings 0.02 0.01] [--seeds 1 2 3] [--fabrics silk denim]
     .venv/bin/python -m benchmarks.cusick_drape --calibrate [--spacings 0.02 0.01]   # rerun the bend calibration
+    .venv/bin/python -m benchmarks.cusick_drape --bending quadratic --membrane orthotropic   # the model options
+
+With --bending quadratic a fabric's `bend` is its measured rigidity B (no calibration: taichi_cloth.bending); with
+--membrane orthotropic its stretch and shear are the square grid's along the pattern's axes (mesh_cloth).
 
 Writes out/bench/cusick_drape.csv and out/bench/cusick_drape.png (a top view of each preset's draped disk, its DC in
-the title); --calibrate writes out/bench/cusick_calibration.csv.
+the title; with a model option the names end -BENDING-MEMBRANE); --calibrate writes out/bench/cusick_calibration.csv.
 """
 from __future__ import annotations
 
@@ -24,10 +28,17 @@ from benchmarks import output_folder, write_csv
 from taichi_cloth import runtime
 from taichi_cloth.fabrics import (CUSICK_PEDESTAL, CUSICK_SPECIMEN, DC_RANGES, FABRICS, calibrate_bend,
                                   cantilever_angle, cusick_drape)
-from taichi_cloth.material import MATERIALS
+from taichi_cloth.material import BENDING_MODELS, MATERIALS, MEMBRANE_MODELS, Material
 
 
-def calibrate(spacings, names, out) -> int:
+def model_material(name: str, bending: str, membrane: str) -> Material:
+    """The preset `name` with the bending model and membrane named: with quadratic bending its bend is the fabric's
+    measured rigidity."""
+    base = MATERIALS[name] if bending == "springs" else FABRICS[name].material(FABRICS[name].rigidity)
+    return base.replace(bending=bending, membrane=membrane)
+
+
+def calibrate(spacings, names, out, bending: str = "springs", membrane: str = "isotropic") -> int:
     rows = []
     print(f"{'fabric':9s} {'h [cm]':>6s} {'c [cm]':>7s} {'B [N m]':>9s} {'bend':>9s} {'bend/B':>7s} "
           f"{'angle':>6s} {'target':>6s} {'c model':>7s} tries")
@@ -35,7 +46,7 @@ def calibrate(spacings, names, out) -> int:
         f = FABRICS[name]
         for h in spacings:
             t0 = time.perf_counter()
-            bend, tries = calibrate_bend(f, h)
+            bend, tries = calibrate_bend(f, h, bending=bending, membrane=membrane)
             best = min(tries, key=lambda bt: abs(bt[0] - bend))[1]
             target = cantilever_angle(best.overhang / f.bending_length)
             row = dict(fabric=name, spacing=h, bending_length=f.bending_length, rigidity=f.rigidity, bend=bend,
@@ -44,9 +55,10 @@ def calibrate(spacings, names, out) -> int:
                        wall=time.perf_counter() - t0)
             rows.append(row)
             print(f"{name:9s} {100 * h:6.1f} {100 * f.bending_length:7.2f} {f.rigidity:9.3g} {bend:9.3g} "
-                  f"{bend / f.rigidity:7.0f} {best.angle:6.1f} {target:6.1f} {100 * best.bending_length:7.2f} "
+                  f"{bend / f.rigidity:7.3g} {best.angle:6.1f} {target:6.1f} {100 * best.bending_length:7.2f} "
                   f"{len(tries)}", flush=True)
-    write_csv(rows, out / "cusick_calibration.csv")
+    write_csv(rows, out / ("cusick_calibration" + ("" if (bending, membrane) == ("springs", "isotropic")
+                                                   else f"-{bending}-{membrane}") + ".csv"))
     return 0
 
 
@@ -81,12 +93,15 @@ def main(argv=None) -> int:
     p.add_argument("--seeds", type=int, nargs="*", default=[1, 2, 3], help="starts moved by 1e-7 m (plus the plain)")
     p.add_argument("--max-time", type=float, default=10.0, help="simulated seconds at most per drape")
     p.add_argument("--calibrate", action="store_true", help="rerun the cantilever calibration of bend instead")
+    p.add_argument("--bending", choices=BENDING_MODELS, default="springs",
+                   help="the bending model: springs (the presets' calibrated bend) or quadratic (the measured B)")
+    p.add_argument("--membrane", choices=MEMBRANE_MODELS, default="isotropic", help="the triangle membrane")
     p.add_argument("--out", default="out/bench")
     args = p.parse_args(argv)
     out = output_folder(args.out)
     runtime.init("cpu")
     if args.calibrate:
-        return calibrate(args.spacings, args.fabrics, out)
+        return calibrate(args.spacings, args.fabrics, out, args.bending, args.membrane)
     rows, shown = [], []
     print(f"{'fabric':9s} {'h [cm]':>6s} {'DC':>6s} {'min':>6s} {'max':>6s} {'range':>11s} {'in':>3s} "
           f"{'t [s]':>6s} {'rest':>4s} {'wall [s]':>8s}")
@@ -96,7 +111,8 @@ def main(argv=None) -> int:
             runs = []
             for seed in [0, *args.seeds]:
                 t0 = time.perf_counter()
-                d = cusick_drape(MATERIALS[name], h, args.max_time, perturb=1e-7 if seed else 0.0, seed=seed)
+                d = cusick_drape(model_material(name, args.bending, args.membrane), h, args.max_time,
+                                 perturb=1e-7 if seed else 0.0, seed=seed)
                 runs.append((seed, d, time.perf_counter() - t0))
                 rows.append(dict(fabric=name, spacing=h, seed=seed, dc=d.dc, shadow=d.shadow, specimen=d.specimen,
                                  time=d.time, at_rest=d.at_rest, wall=runs[-1][2], range_lo=lo, range_hi=hi))
@@ -108,9 +124,11 @@ def main(argv=None) -> int:
                   f"{sum(w for *_, w in runs) / len(runs):8.1f}", flush=True)
             if h == args.spacings[0]:
                 shown.append((name, d0))
-    write_csv(rows, out / "cusick_drape.csv")
-    picture(shown, out / "cusick_drape.png")
-    print(f"wrote {out / 'cusick_drape.csv'} and {out / 'cusick_drape.png'}")
+    stem = "cusick_drape" + ("" if (args.bending, args.membrane) == ("springs", "isotropic")
+                             else f"-{args.bending}-{args.membrane}")
+    write_csv(rows, out / f"{stem}.csv")
+    picture(shown, out / f"{stem}.png")
+    print(f"wrote {out / f'{stem}.csv'} and {out / f'{stem}.png'}")
     return 0
 
 

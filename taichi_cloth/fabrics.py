@@ -297,20 +297,23 @@ def simulate_cantilever(material: Material, spacing: float, overhang: float, wid
 
 
 def calibrate_bend(fabric: Fabric, spacing: float, tolerance: float = 0.5, max_tries: int = 12,
-                   start: float | None = None) -> tuple[float, list[tuple[float, Cantilever]]]:
+                   start: float | None = None, bending: str = "springs",
+                   membrane: str = "isotropic") -> tuple[float, list[tuple[float, Cantilever]]]:
     """The model's `bend` [N m] for which a simulated cantilever at `spacing` [m], overhanging by
     cantilever_overhang(c, spacing), has its tip at the angle an elastica of the fabric's measured bending length c
     has there (41.5 degrees at the standards' overhang of 2 c), within `tolerance` [deg]; and the (bend, cantilever)
     pairs tried. The model's bend springs resist a hinge's fold angle theta with a force ~ theta^2 (their length
     changes to second order), so the strip's tip angle falls slowly with bend: the search brackets it by factors of
-    4 from the measured rigidity (or `start`), then narrows the bracket by regula falsi on log(bend) (Illinois)."""
+    4 from the measured rigidity (or `start`), then narrows the bracket by regula falsi on log(bend) (Illinois).
+    bending, membrane: the Material's models (with "quadratic" bending, `bend` is a rigidity and lands near B)."""
     target_c = fabric.bending_length
     overhang = cantilever_overhang(target_c, spacing)
     target = cantilever_angle(overhang / target_c)
     tries: list[tuple[float, Cantilever]] = []
 
     def miss(bend: float) -> float:
-        result = simulate_cantilever(fabric.material(bend), spacing, overhang)
+        result = simulate_cantilever(fabric.material(bend).replace(bending=bending, membrane=membrane), spacing,
+                                     overhang)
         tries.append((bend, result))
         return result.angle - target  # > 0: too soft
 
