@@ -96,6 +96,18 @@ def table(rows: list[dict], resolution: str, moved: list[dict] | None = None) ->
     return "\n".join(lines), ok, counted, steady
 
 
+def run_batch(resolution: str, folder: Path, csv: Path, workers: int | None, extra=()) -> list[dict] | None:
+    """Run the matrix's batch of one resolution into `folder` (extra: more `batch` arguments), copy its CSV to `csv`
+    and return its rows (None when the batch could not run)."""
+    command = ["batch", str(SPECS[resolution]), "--out", str(folder), *extra]
+    if workers:
+        command += ["--workers", str(workers)]
+    if cli(command) not in (0, 1):
+        return None
+    shutil.copyfile(folder / "results.csv", csv)
+    return read_table(folder / "results.parquet")
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--fit", action="store_true", help="also the mannequin row at 1 cm (15 jobs more)")
@@ -110,24 +122,16 @@ def main(argv=None) -> int:
     total_ok = total = 0
     for resolution in ("draft", "fit") if args.fit else ("draft",):
         folder = out / f"batch-{resolution}"
-        command = ["batch", str(SPECS[resolution]), "--out", str(folder)]
-        if args.workers:
-            command += ["--workers", str(args.workers)]
-        if cli(command) not in (0, 1):
+        rows = run_batch(resolution, folder, out / f"results-{resolution}.csv", args.workers)
+        if rows is None:
             return 2
-        rows = read_table(folder / "results.parquet")
-        shutil.copyfile(folder / "results.csv", out / f"results-{resolution}.csv")
         moved = None
         if args.starts > 0:
-            moved_folder = out / f"batch-{resolution}-moved"
-            command = ["batch", str(SPECS[resolution]), "--out", str(moved_folder), "--perturb", str(MOVE),
-                       "--seeds", *[str(k) for k in range(1, args.starts + 1)]]
-            if args.workers:
-                command += ["--workers", str(args.workers)]
-            if cli(command) not in (0, 1):
+            moved = run_batch(resolution, out / f"batch-{resolution}-moved", out / f"results-{resolution}-moved.csv",
+                              args.workers, ["--perturb", str(MOVE), "--seeds",
+                                             *[str(k) for k in range(1, args.starts + 1)]])
+            if moved is None:
                 return 2
-            moved = read_table(moved_folder / "results.parquet")
-            shutil.copyfile(moved_folder / "results.csv", out / f"results-{resolution}-moved.csv")
         text, ok, counted, steady = table(rows, "2 cm" if resolution == "draft" else "1 cm", moved)
         total_ok, total = total_ok + ok, total + counted
         line = (f"{text}\n\n{ok} of {counted} jobs ok at {'2' if resolution == 'draft' else '1'} cm "

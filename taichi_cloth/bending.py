@@ -4,7 +4,7 @@ surfaces", SGP 2006) written as zero-rest-length pair springs.
 For an interior edge (x0, x1) with apexes x2 and x3 of its two triangles, and the cotangents of the rest triangles'
 angles at the edge's ends (alpha_0, beta_0 in the first triangle at x0, x1; alpha_1, beta_1 in the second),
 
-    K = [cot beta_0 + cot beta_1,  cot alpha_0 + cot alpha_1,  -(cot alpha_0 + cot beta_0),  -(cot alpha_1 + cot beta_1)],
+    K = [cot b0 + cot b1,  cot a0 + cot a1,  -(cot a0 + cot b0),  -(cot a1 + cot b1)]   (a = alpha, b = beta),
     Q = K K^T / (A_0 + A_1),        E = B / 2 * sum over edges of x^T Q x     (Q acting on each coordinate),
 
 B the bending rigidity [N m]. K x is 0 on any flat placement of the rest triangles and |e| * 2 sin(theta / 2) at a

@@ -123,10 +123,10 @@ def orthotropic_edges(uv: np.ndarray, triangles: np.ndarray, n_edges: int, face_
     warp and weft of a woven fabric): C11 = C22 = stretch + shear, C66 = C12 = shear, so a pull along an axis meets
     `stretch` and a shear (a pull on the bias) only `shear`. A central spring of constant k, length L and direction
     (c, s) adds k L^2 / A (c^4, s^4, c^2 s^2) to a triangle's (C11, C22, C66); each triangle's three constants solve
-    those three equations (least squares where they are singular, as on the 45-degree-rotated 4-8 levels, and none
-    below 0, by non-negative least squares on relative errors), and an edge's constant is the sum of its triangles',
-    at least `shear`. On the 4-8 lattice it is exact: the axis edges get
-    `stretch` and the diagonals 2 x `shear`, the square grid's springs (tests/test_bending.py). The isotropic rule
+    those three equations (by non-negative least squares on relative errors where no constants >= 0 solve them
+    exactly: the pattern mesher's boundary band, the 45-degree-rotated 4-8 levels), and an edge's constant is the
+    sum of its triangles', at least `shear`. On the 4-8 lattice it is exact: the axis edges get `stretch` and the
+    diagonals 2 x `shear`, the square grid's springs (tests/test_membrane.py). The isotropic rule
     instead ties the shear to the stretch (G = 3 E / 8), which a fabric's bias does not (silk: 22 N/m against
     9807), and which holds a draped fabric in too few folds.
     face_edge: (T,3) the edge id of each triangle's edge k (from corner k to k + 1)."""
@@ -175,8 +175,9 @@ def mesh_cloth(vertices, triangles, material: str | Material = "cotton", source:
     """A cloth from any manifold triangle mesh (vertices (V,3) [m], triangles (T,3)).
 
     Structural springs on every edge; bending springs by the material's model (bend_springs: across every interior
-    edge between its two opposite vertices with k = bend / L0^2, or the quadratic energy's pairs); masses density * (adjacent area) / 3. No shear springs: the triangle
-    edges already resist shear. The structural constant follows `stiffness_rule`:
+    edge between its two opposite vertices with k = bend / L0^2, or the quadratic energy's pairs); masses density *
+    (adjacent area) / 3. No shear springs: the triangle edges already resist shear. The structural constant follows
+    `stiffness_rule`:
       "edge-area": k = stretch * A_e / L0^2 (A_e = area of the triangles sharing the edge; Van Gelder);
       "isotropic": k = sum over the edge's triangles t of 3 E A_t / (sum of t's squared edge lengths),
                    E = material.sheet_modulus. Every edge of a right isosceles (4-8) or an equilateral

@@ -265,3 +265,22 @@ def test_the_same_batch_on_a_local_ray_cluster_gives_the_same_table(tiny, tmp_pa
         assert a["outputs"] == b["outputs"] and a["particles"] == b["particles"]
         assert a["frames"] == pytest.approx(b["frames"], abs=3)
     assert read_row(Path(make_jobs(load_spec(spec, tmp_path / "ray"))[0].dir))["status"] == OK
+
+
+def test_the_garment_matrix_counts_a_job_steady_only_when_every_moved_start_rests_in_time():
+    """benchmarks.garment_matrix.table: an ok job with all its moved starts ok gives its rest-time range; one whose
+    moved start is still moving, or rests after REST_WITHIN, is named "moved: k of n" and not counted steady; a job
+    too small for its body is not counted at all."""
+    from benchmarks.garment_matrix import REST_WITHIN, table
+
+    def row(body, material, status="ok", rest=2.0):
+        return {"garment": "skirt", "body": body, "material": material, "status": status, "rest_time_s": rest,
+                "reason": "" if status == "ok" else "too small: the waistband is 68 cm and the waist 80 cm"}
+
+    plain = [row("A", "silk"), row("B", "silk"), row("C", "silk", "too small", None)]
+    moved = [row("A", "silk", rest=1.5), row("A", "silk", rest=2.5), row("A", "silk", rest=3.0),
+             row("B", "silk", rest=2.2), row("B", "silk", rest=REST_WITHIN + 0.1),
+             row("B", "silk", "not at rest by the cap", None)]
+    text, ok, counted, steady = table(plain, "2 cm", moved)
+    assert (ok, counted, steady) == (2, 2, 1)
+    assert "ok 1.50-3.00 s |" in text and "ok 2.00-2.20 s (moved: 1 of 3)" in text and "too small" in text
