@@ -339,7 +339,8 @@ def merge_seams(data: ClothData, garment, x: np.ndarray, v: np.ndarray):
     """Merge every seam pair of `garment` into one particle (connected components: a corner on two seams merges
     with all its partners). Mass adds up; position and velocity are mass-weighted means (momentum is conserved).
     Seam springs go; springs whose ends merged go; new bend springs span every seam edge, with the rest length
-    of the two pattern triangles unfolded flat (with quadratic bending, its pairs are rebuilt on the merged mesh). Returns (ClothData, x, v, current_of (P0,) int64)."""
+    of the two pattern triangles unfolded flat (with quadratic bending, its pairs are rebuilt on the merged mesh).
+    Returns (ClothData, x, v, current_of (P0,) int64)."""
     roots = connected_components(data.n_particles, garment.seam_pairs)
     _, current_of = np.unique(roots, return_inverse=True)
     n = int(current_of.max()) + 1
