@@ -35,7 +35,7 @@ def load_scene_file(source: str | Path | dict, args: argparse.Namespace,
     "cpu") once the file has parsed, so a bad file fails before Taichi starts. Raises SceneError for bad input
     and for a run longer than the step guard allows without --yes."""
     parse_scene(source, Path(base_dir) if base_dir is not None else None)
-    perturb, seed = _perturbation(args)
+    perturb, seed = perturbation(args)
     runtime.init(getattr(args, "arch", None) or "cpu")
     loaded = load_scene(source, frames=getattr(args, "frames", None), integrator=getattr(args, "integrator", None),
                         dt=getattr(args, "dt", None), precision=getattr(args, "precision", None),
@@ -51,7 +51,7 @@ def load_scene_file(source: str | Path | dict, args: argparse.Namespace,
     return loaded
 
 
-def _perturbation(args: argparse.Namespace) -> tuple[float | None, int]:
+def perturbation(args: argparse.Namespace) -> tuple[float | None, int]:
     """(--perturb [m] or None, --seed); SceneError for a distance that is negative or not finite, or a seed
     without a perturbation (it would be ignored)."""
     perturb, seed = getattr(args, "perturb", None), getattr(args, "seed", None)

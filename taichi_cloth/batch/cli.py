@@ -3,19 +3,20 @@ machine's cores (the process pool) or on a Ray cluster; a results table, a conta
 (docs/batch.md). Rerunning the same command skips the jobs already finished."""
 from __future__ import annotations
 
-import math
+import argparse
 import os
 import sys
 from pathlib import Path
 
 from ..guards import human_seconds
 from ..paths import check_output_folder
+from ..run import perturbation
 from .figures import OK, STATUSES
 from .jobs import make_jobs
 from .pool import ProcessPool
 from .schedule import Progress, run_jobs
 from .sheet import SHEET, write_sheet
-from .spec import BatchError, load_spec
+from .spec import load_spec
 from .table import write_table
 from .worker import read_row, write_row
 
@@ -45,13 +46,11 @@ def add_parser(sub) -> None:
 
 def run(args) -> int:
     spec = load_spec(args.spec, args.out)
-    perturb, seeds = getattr(args, "perturb", None), getattr(args, "seeds", None)
+    perturb, _ = perturbation(argparse.Namespace(perturb=getattr(args, "perturb", None)))  # one check for both
     if perturb is not None:
-        if not math.isfinite(perturb) or perturb < 0:
-            raise BatchError(f"--perturb must be a distance >= 0 m, got {perturb}")
         spec.run["perturb"] = perturb
-    if seeds:
-        spec.run["seeds"] = list(seeds)
+    if getattr(args, "seeds", None):
+        spec.run["seeds"] = list(args.seeds)
     jobs = make_jobs(spec)
     check_output_folder(spec.out)
     rows, todo = {}, []
