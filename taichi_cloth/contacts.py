@@ -8,8 +8,9 @@ section 5.3): without it the solve, unaware of
 the body, lets a particle's falling neighbours drag it into the body every step, the projection puts it
 back, and the cloth stretches around every contact (we measured 30-260 % strain on a 10 cm ball at
 h = 1/120 s; with the filter it stays at a few per cent). The implicit integrator also decides, before its solve,
-which contacts stick (static friction: the particle is held, S_i = 0) from the force that presses them on the body
-(taichi_cloth.integrators.implicit). Built only when a scene has colliders.
+which contacts stick (static friction: the particle is held, S_i = 0) from the force that presses them on the body,
+and gives a sliding one the dashpot of its kinetic friction in the solve (taichi_cloth.integrators.implicit). Built
+only when a scene has colliders.
 """
 import taichi as ti
 

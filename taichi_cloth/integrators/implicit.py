@@ -29,6 +29,8 @@ collider in the last step has its normal component filtered (S_i = I - n n^T: it
 change in the solve, the collider handles it). A contact the force pulls off the body is released (nothing
 filtered), for leaving only: the line search removes from every candidate the velocity into the body it would give
 such a particle, and a particle it had to correct is held (filtered) in any further Newton iteration (an active set).
+Friction at a contact is in the solve too: a sticking particle is held (S_i = 0), a sliding one carries a dashpot of
+the force mu lambda at its speed (_contact_friction).
 """
 
 import taichi as ti
@@ -73,6 +75,9 @@ class Implicit(Integrator):
                              "closing seam's add up over the steps; off where a drape keeps fluttering at rest: at a "
                              "loose tolerance it can carry a flutter from step to step)"),
     }
+    #: [m/s] a contact slower than this with its force within the friction cone sticks (_contact_friction); the
+    #: sliding friction's dashpot is mu lambda / eps at most. A tenth of the rest criterion's p99 speed
+    STICK_SPEED = 1e-4
     #: the step lengths the line search tries, longest first, and the sufficient decrease it asks for
     ALPHAS = (1.0, 0.5, 0.25, 0.125)
     #: the terms a particle or a spring adds to the step's sums: IP(alpha = 0), IP(ALPHAS...), grad.dv, then
@@ -230,25 +235,37 @@ class Implicit(Integrator):
 
     @ti.kernel
     def _contact_friction(self, dt: ti.f64):
-        """Coulomb friction at the contacts of the last step, before the solve (Baraff and Witkin 1998, section 5:
-        the constraint decides what the solve may change). For a particle with a contact normal n and the force f on
-        it now (springs, gravity, drag, sources), f_n = -f.n presses it on the body:
-          * f_n <= 0 and not moving in: released (no constraint this step);
-          * else its normal velocity is removed (it rests on the body), and friction can take up to
-            dv = mu f_n h / m of its tangential velocity in this step: where that stops it and the tangential force
-            is within the friction cone (|f_t| <= mu f_n), it sticks (held where it is: every direction filtered,
-            v = 0); otherwise it slides (its normal direction filtered), its tangential velocity reduced by dv.
-        Velocities are relative to the contact's surface (Contacts.velocity: a moving collider's).
-        The velocities change in a second pass, after every force was read at the old ones."""
+        """Coulomb friction at the contacts of the last step, decided before the solve (Baraff and Witkin 1998,
+        section 5: the constraint decides what the solve may change). For a particle with a contact normal n and the
+        force f on it now (springs, gravity, drag, sources), lambda = -f.n presses it on the body:
+          * lambda <= 0 and not moving in: released (no constraint this step);
+          * else its normal velocity is removed (it rests on the body; the filter keeps it so in the solve), and
+            - slower than eps = STICK_SPEED with the tangential force within the cone (|f_t| <= mu lambda): it
+              sticks, held where it is (every direction filtered, v = 0);
+            - else it slides, and friction enters the solve as the lagged dissipation of Li et al. 2020 (IPC,
+              section 5) with lambda and a speed s frozen over the step: a dashpot c = mu lambda / max(s, eps) on
+              the velocity relative to the surface, a force mu lambda against the motion at the speed s, the larger
+              of |v_t| at the step's start and |v_t + h f_t / m| - h mu lambda / m (its speed at the end of a step
+              under Coulomb friction alone: a sheet sliding down a slope then has the Coulomb acceleration to 1 %,
+              tests/test_friction.py). It is in A's diagonal (BlockSystem.extra_mass = h c), in b and in the
+              incremental potential (1/2 h c |v - w|^2) the line search weighs: the solve sees what friction takes
+              in the step, and friction only dissipates.
+        Applied after the solve instead, as a velocity cut at the next step's start, the solve moved a sliding
+        particle by its whole force in every step: a skirt on a loose waistband crept down the body at 0.5 mm/s
+        in stick-slip bursts for 10 s (docs/garments.md). Velocities are relative to the contact's surface
+        (Contacts.velocity: a moving collider's). The velocities change in a second pass, after every force was
+        read at the old ones."""
         m, s, c = self.model, self.state, self.contacts
         h = ti.cast(dt, m.fp)
+        eps = ti.static(self.STICK_SPEED)
         ti.loop_config(serialize=self.model.serial)
         for i in range(m.n_particles[None]):
             n = c.normal[i]
             w = c.velocity[i]  # the surface's: friction and resting act on the velocity relative to it
             v = s.v[i] - w
-            stuck = 0
             released = 0
+            stuck = 0
+            drag = ti.cast(0.0, m.fp)
             if m.inv_mass[i] != 0 and n.dot(n) > 0:
                 n = n.normalized()
                 f = self.forces.particle_force(i, True)
@@ -260,22 +277,28 @@ class Implicit(Integrator):
                     # waist particle went 0.7 mm up and back at 85 mm/s for good)
                     released = 1
                 else:
-                    vt = v - vn * n
-                    ft = f + fn * n
-                    mu = c.friction[i] * c.friction_scale[None]
-                    take = mu * ti.max(fn, 0.0) * h * m.inv_mass[i]
-                    if vt.norm() <= take and ft.norm() <= mu * fn:
-                        stuck = 1
-                        vt = ti.Vector.zero(m.fp, 3)
-                    else:
-                        vt *= ti.max(0.0, 1.0 - take / ti.max(vt.norm(), 1e-30))
                     # resting on the body: no normal velocity. An approaching one is removed; so is a leaving one, which
                     # the filter would otherwise keep against the force that presses (the T-shirt at rest gained
                     # 3e-5 J a step that way), and which freed would fall back and be pushed out every step
-                    v = vt
+                    v -= vn * n
+                    slide = v.norm()
+                    mu = c.friction[i] * c.friction_scale[None]
+                    ft = f + fn * n
+                    if slide < eps and ft.norm() <= mu * fn:
+                        stuck = 1
+                        v = ti.Vector.zero(m.fp, 3)
+                    else:
+                        # the dashpot's force is mu lambda at the larger of the speed at the start and at the end of
+                        # a step under Coulomb friction alone: at the start's alone, a sheet starting to slide down a
+                        # slope was held 10-40 % more; at the end's alone, a particle its neighbours hold back
+                        # stopped, and with it the sheet
+                        press = ti.max(fn, 0.0)
+                        end = (v + h * m.inv_mass[i] * ft).norm() - h * m.inv_mass[i] * mu * press
+                        drag = h * mu * press / ti.max(ti.max(end, slide), eps)
             self.pcg.q[i] = w + v  # scratch: the new velocity
-            c.stuck[i] = stuck
             c.released[i] = released
+            c.stuck[i] = stuck
+            self.system.extra_mass[i] = drag
         ti.loop_config(serialize=self.model.serial)
         for i in range(m.n_particles[None]):
             s.v[i] = self.pcg.q[i]
@@ -380,6 +403,8 @@ class Implicit(Integrator):
                         dvel = s.v[i] - s.v[m.adj_other[e]]
                         kv += (sy.axial[sp] - h * m.damping[sp]) * u.dot(dvel) * u \
                             + (sy.iso[sp] - h * m.viscous[sp]) * dvel
+                if ti.static(self.has_contacts):  # the friction's lagged dashpot (_contact_friction)
+                    kv += sy.extra_mass[i] * (s.v[i] - self.contacts.velocity[i])
                 b = self.filter.apply(i, h * fm.particle_force(i, True) - kv - m.mass[i] * self.dv_total[i])
             self.b[i] = b
 
@@ -417,6 +442,9 @@ class Implicit(Integrator):
             x = x0 + hh * v
             terms[j] = 0.5 * mass * dvt.dot(dvt) - mass * grav.dot(x) + 0.5 * hh * gamma * mass * v.dot(v) \
                 - hh * ext.dot(a * d)
+            if ti.static(self.has_contacts):  # the friction's dissipation (_contact_friction)
+                slip = v - ti.cast(self.contacts.velocity[i], ti.f64)
+                terms[j] += 0.5 * ti.cast(self.system.extra_mass[i], ti.f64) * slip.dot(slip)
             terms[self.TERMS // 2 + j] = 0.5 * mass * v.dot(v) - mass * grav.dot(x)
 
     @ti.func

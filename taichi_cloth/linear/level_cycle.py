@@ -15,7 +15,8 @@ A V(nu, nu) cycle (the preconditioner, symmetric as CG needs):
     float64) once per system, in one thread (n0 = 25 for the usual 4 x 4 base);
   * contacts, on the simulated level: a particle that static friction holds is fixed as a pin is, and a sliding
     one has its smoother block, its residual and its coarse correction filtered (S = I - n n^T: the block
-    S D S + m'(I - S)), so that the cycle smooths the filtered system CG solves;
+    S D S + m'(I - S)), so that the cycle smooths the filtered system CG solves; the sliding friction's dashpot
+    (the system's extra_mass) is on its diagonal, as in A;
   * pins: a particle of the simulated level with inverse mass 0 is fixed; a coarser vertex is fixed iff it is a
     prolongation parent of a fixed vertex of the level above, so that a prolonged correction vanishes at the
     pins by construction (zeroing the correction afterwards is not enough: with one pinned midpoint the coarse
@@ -186,6 +187,7 @@ class SpringMultigrid:
         self.level = blk.scalar(ti.i32, ())               # the active level
         self.weight = blk.scalar(fp, ())                  # omega
         self.nrm = blk.vector(3, fp, N)                   # unit normal of a sliding contact (simulated level), or 0
+        self.extra = blk.scalar(fp, N)                    # the system's extra_mass (simulated level), or 0 [kg]
         blk.finalize(self)
         self.omega = float(omega)
 
@@ -263,7 +265,8 @@ class SpringMultigrid:
     @ti.func
     def _block(self, g, mass_scale):
         return diagonal_block(self.fp, self.mass[g], mass_scale, self.adj_ptr[g], self.adj_ptr[g + 1],
-                              self.adj_spring, self.u, self.axial, self.iso)
+                              self.adj_spring, self.u, self.axial, self.iso) \
+            + ti.Matrix.identity(self.fp, 3) * self.extra[g]
 
     @ti.func
     def _filtered(self, g, vec):
@@ -274,7 +277,8 @@ class SpringMultigrid:
     @ti.func
     def _apply_A(self, g):
         """(A x)_g on g's level, from the current iterate x."""
-        return spring_row(self.mass[g] * self.mass_scale[None] * self.x[g], g, self.adj_ptr[g], self.adj_ptr[g + 1],
+        return spring_row((self.mass[g] * self.mass_scale[None] + self.extra[g]) * self.x[g], g, self.adj_ptr[g],
+                          self.adj_ptr[g + 1],
                           self.adj_spring, self.adj_other, self.u, self.axial, self.iso, self.x)
 
     # ------------------------------------------------------------------ the kernels
@@ -311,8 +315,10 @@ class SpringMultigrid:
                 g = ti.static(int(self.offsets[l])) + i
                 fixed = 0
                 nrm = ti.Vector.zero(self.fp, 3)
+                extra = ti.cast(0.0, self.fp)
                 if l == active:
                     fixed = ti.select(filt.model.inv_mass[i] == 0, 1, 0)
+                    extra = ti.cast(system.extra_mass[i], self.fp)
                     if ti.static(filt.has_contacts):
                         if filt.contacts.stuck[i] != 0:
                             fixed = 1
@@ -321,6 +327,7 @@ class SpringMultigrid:
                             nrm = n / n.norm()
                 self.pin[g] = fixed
                 self.nrm[g] = nrm
+                self.extra[g] = extra
         for k in ti.static(range(L - 1)):
             l = ti.static(L - 1 - k)  # from the finest down: level l marks the parents on level l - 1
             ti.loop_config(serialize=ti.static(self.sizes[l] < self.serial_below))

@@ -1,12 +1,13 @@
 """The block system of one Newton iteration of the implicit step, and the constraint filter CG solves it under.
 
-    A = M' + sum over springs s = (a, b) of B_s (dv_a - dv_b) at a, -B_s (...) at b,    M' = M (1 + h gamma),
+    A = M' + E + sum over springs s = (a, b) of B_s (dv_a - dv_b) at a, -B_s (...) at b,    M' = M (1 + h gamma),
     B_s = (h kd + h^2 k (1 - g)) u u^T + (h^2 k g + h c) I,    g = max(0, 1 - L0 / l),
 
 u the spring's unit direction and l its length at the iterate, k, kd, c, L0 [N/m, N s/m, N s/m, m] its stiffness,
 axial damping, isotropic dashpot and rest length (the clamp g >= 0 keeps A symmetric positive definite, Choi and Ko
-2002). Stored as one (u, axial, iso) per spring; the diagonal blocks and products are per-particle gathers over the
-model's CSR adjacency. `spring_coefficients` and `spring_block` are the one place the formula is written: the 4-8
+2002), E the diagonal extra_mass h c_i of a dashpot c_i on particle i alone (a sliding contact's friction). Stored
+as one (u, axial, iso) per spring; the diagonal blocks and products are per-particle gathers over the model's CSR
+adjacency. `spring_coefficients` and `spring_block` are the one place the formula is written: the 4-8
 V-cycle rediscretises every level with them, the aggregation cycle sums its coarse levels from them.
 
 The filter (Baraff and Witkin 1998, section 5.3): CG solves S A S dv = S b with S_i = 0 at a pin or at a contact
@@ -112,8 +113,10 @@ class BlockSystem:
     x:      the (P,) vec3 positions [m] the springs are evaluated at (the state's: the implicit step writes the
             iterate there)
     Fields, sized at the model's capacity: u (S,) vec3 unit directions, axial and iso (S,) [kg], mass_scale () = 1 +
-    h gamma, live () int32: 1 while the step's Newton iterations go on (the implicit step decides on the device; the
-    kernels of an iteration past its end loop over nothing: `gated`). h [s] and h_gamma [-] of the current system
+    h gamma, extra_mass (P,) [kg]: h c_i of a viscous term c_i (v_i - w_i) of particle i alone, added to its mass
+    term on the diagonal (the contacts' friction: taichi_cloth.integrators.implicit; 0 elsewhere), live () int32: 1
+    while the step's Newton iterations go on (the implicit step decides on the device; the kernels of an iteration
+    past its end loop over nothing: `gated`). h [s] and h_gamma [-] of the current system
     are kept on the host for the V-cycles' own levels.
     """
 
@@ -126,6 +129,7 @@ class BlockSystem:
         self.axial = blk.scalar(fp, S)
         self.iso = blk.scalar(fp, S)
         self.mass_scale = blk.scalar(fp, ())
+        self.extra_mass = blk.scalar(fp, max(model.capacity[0], 1))
         self.live = blk.scalar(ti.i32, ())
         blk.finalize(self)
         self.live[None] = 1
@@ -152,10 +156,10 @@ class BlockSystem:
 
     @ti.func
     def diagonal(self, i, mass_scale):
-        """A's 3x3 diagonal block of particle i, M'_i + sum of its springs' B_s [kg]."""
+        """A's 3x3 diagonal block of particle i, M'_i + E_i + sum of its springs' B_s [kg]."""
         m = self.model
         return diagonal_block(m.fp, m.mass[i], mass_scale, m.adj_offset[i], m.adj_offset[i + 1], m.adj_spring,
-                              self.u, self.axial, self.iso)
+                              self.u, self.axial, self.iso) + ti.Matrix.identity(m.fp, 3) * self.extra_mass[i]
 
     @ti.func
     def spring_product(self, i, vec: ti.template()):
@@ -168,4 +172,5 @@ class BlockSystem:
     def product(self, i, vec: ti.template(), filt: ti.template()):
         """(S A vec)_i (0 at a pin)."""
         m = self.model
-        return filt.apply(i, m.mass[i] * self.mass_scale[None] * vec[i] + self.spring_product(i, vec))
+        return filt.apply(i, (m.mass[i] * self.mass_scale[None] + self.extra_mass[i]) * vec[i]
+                          + self.spring_product(i, vec))
