@@ -244,7 +244,8 @@ def test_on_a_resting_drape_the_two_modes_do_the_same_tests():
     # fewest seen: a sheet that slid off or hovers touches with none
     assert results["fuzzy"][2] >= 5
     assert body.signed_distance(x_fuzzy).min() >= -5e-4  # caught crossings are undone: nothing ends inside
-    assert c_exact["crossings"] == c_fuzzy["crossings"] <= 3  # of 38,400 particle steps
+    # of 38,400 particle steps: 4 with friction in the implicit solve (3 with it cut after the solve)
+    assert c_exact["crossings"] == c_fuzzy["crossings"] <= 8
     assert c_fuzzy["candidates"] == c_exact["candidates"] and c_fuzzy["queries"] == c_exact["queries"]
     # the fuzzy order tests every mu > 0 candidate as exact does, except the ones a caught crossing lets it skip
     cut = c_exact["crossing_tests"] - c_fuzzy["crossing_tests"]
