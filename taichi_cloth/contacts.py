@@ -25,7 +25,10 @@ class Contacts:
     integrator holds the particle by static friction this step (every direction filtered); released: (P,) i32, 1 where
     the integrator lets a touching particle leave the body this step (the force pulls it away: no direction filtered).
     The normal of a released particle stays as the colliders wrote it: the stretch limit still sees it on the body.
-    before: (P,) i32, 1 where the particle had a contact after the step before (the colliders give it a wider band)."""
+    before: (P,) i32, 1 where the particle had a contact after the step before (the colliders give it a wider band);
+    previous, previous2: (P,) vec3, that contact's normal and the one of the step before it (0 if none); crease: (P,)
+    vec3, a second unit normal the integrator holds the particle against this step, 0 if none (a crease of the body
+    where the contact alternates between two faces: see `projector`)."""
 
     def __init__(self, model):
         self.model = model
@@ -36,6 +39,9 @@ class Contacts:
         self.stuck = blk.scalar(ti.i32, model.capacity[0])
         self.released = blk.scalar(ti.i32, model.capacity[0])
         self.before = blk.scalar(ti.i32, model.capacity[0])
+        self.previous = blk.vector(3, model.fp, model.capacity[0])
+        self.previous2 = blk.vector(3, model.fp, model.capacity[0])
+        self.crease = blk.vector(3, model.fp, model.capacity[0])
         self.friction_scale = blk.scalar(model.fp, ())  # 0 switches friction off (sewing: pieces slide into place)
         blk.finalize(self)
         self.friction_scale[None] = 1.0
@@ -54,11 +60,15 @@ class Contacts:
         for i in range(self.model.n_particles[None]):
             n = self.normal[i]
             self.before[i] = ti.cast(n.dot(n) > 0 and held == 0, ti.i32)
+            zero = ti.Vector.zero(self.model.fp, 3)
+            self.previous2[i] = self.previous[i] if held == 0 else zero
+            self.previous[i] = n if held == 0 else zero
             self.normal[i] = ti.Vector.zero(self.model.fp, 3)
             self.velocity[i] = ti.Vector.zero(self.model.fp, 3)
             self.released[i] = 0
             if held != 0:
                 self.stuck[i] = 0
+                self.crease[i] = ti.Vector.zero(self.model.fp, 3)
 
     @ti.func
     def sliding_normal(self, i):
@@ -71,7 +81,9 @@ class Contacts:
     @ti.func
     def projector(self, i):
         """Particle i's filter S_i (3x3): 0 when stuck, I - n n^T / |n|^2 on a contact (divided by |n|^2: a normal
-        written in float32 is unit only to 1e-7, and S must be a projector), else I (no contact, or released)."""
+        written in float32 is unit only to 1e-7, and S must be a projector), else I (no contact, or released). In a
+        crease (a second normal p held this step) also without the part of p across n: the particle slides along
+        the crease's line only."""
         n = self.sliding_normal(i)
         nn = n.dot(n)
         S = ti.Matrix.identity(self.model.fp, 3)
@@ -79,6 +91,10 @@ class Contacts:
             S = ti.Matrix.zero(self.model.fp, 3, 3)
         elif nn > 0:
             S -= n.outer_product(n) / nn
+            q = S @ self.crease[i]
+            qq = q.dot(q)
+            if qq > 0:
+                S -= q.outer_product(q) / qq
         return S
 
     @ti.func

@@ -78,6 +78,9 @@ class Implicit(Integrator):
     #: [m/s] a contact slower than this with its force within the friction cone sticks (_contact_friction); the
     #: sliding friction's dashpot is mu lambda / eps at most. A tenth of the rest criterion's p99 speed
     STICK_SPEED = 1e-4
+    #: [-] cosine of the angle (10 degrees) by which a particle's contact normal must differ from its last step's for
+    #: the two to make a crease (_contact_friction)
+    CREASE_COS = 0.985
     #: the step lengths the line search tries, longest first, and the sufficient decrease it asks for
     ALPHAS = (1.0, 0.5, 0.25, 0.125)
     #: the terms a particle or a spring adds to the step's sums: IP(alpha = 0), IP(ALPHAS...), grad.dv, then
@@ -266,6 +269,7 @@ class Implicit(Integrator):
             released = 0
             stuck = 0
             drag = ti.cast(0.0, m.fp)
+            crease = ti.Vector.zero(m.fp, 3)
             if m.inv_mass[i] != 0 and n.dot(n) > 0:
                 n = n.normalized()
                 f = self.forces.particle_force(i, True)
@@ -281,10 +285,45 @@ class Implicit(Integrator):
                     # the filter would otherwise keep against the force that presses (the T-shirt at rest gained
                     # 3e-5 J a step that way), and which freed would fall back and be pushed out every step
                     v -= vn * n
+                    ft = f + fn * n
+                    press = fn
+                    # a crease (under the arm, between the legs): held against its one normal n, the solve moved the
+                    # particle along n's plane into the next face, the collider pushed it out along that face's
+                    # normal, and the next step the other way: a 2-cycle of 0.1 mm at 20-30 mm/s under the arm of a
+                    # top that kept it from resting. Where the contact alternates between two faces (the normal two
+                    # steps ago is n's face, the last step's another's, p), the particle touches both: held against
+                    # both while the force or the motion presses it into p, it slides along the crease's line, and
+                    # stays in the crease while its contact is either face. (A particle sliding over the body meets
+                    # one face after another and never comes back: no crease.)
+                    if c.before[i] != 0 and c.friction_scale[None] > 0:
+                        p = c.previous[i]
+                        held = c.crease[i]
+                        crease_now = 0
+                        same = p.dot(p) > 0 and p.normalized().dot(n) >= ti.static(self.CREASE_COS)
+                        if held.dot(held) > 0:  # in a crease the last step, between p and held
+                            if same:
+                                p = held
+                                crease_now = 1
+                            elif held.normalized().dot(n) >= ti.static(self.CREASE_COS):
+                                crease_now = 1
+                        elif p.dot(p) > 0 and not same:
+                            p2 = c.previous2[i]
+                            crease_now = ti.select(p2.dot(p2) > 0 and p2.normalized().dot(n) >= ti.static(
+                                self.CREASE_COS), 1, 0)
+                        if crease_now != 0:
+                            p = p.normalized()
+                            if -0.5 < p.dot(n) < ti.static(self.CREASE_COS):  # facing faces: a thin part, no crease
+                                q = (p - p.dot(n) * n).normalized()
+                                fq = -ft.dot(q)
+                                vq = v.dot(q)
+                                if fq > 0 or vq < 0:
+                                    crease = p
+                                    v -= vq * q
+                                    ft += fq * q
+                                    press = ti.sqrt(ti.max(fn, 0.0) ** 2 + fq ** 2)
                     slide = v.norm()
                     mu = c.friction[i] * c.friction_scale[None]
-                    ft = f + fn * n
-                    if slide < eps and ft.norm() <= mu * fn:
+                    if slide < eps and ft.norm() <= mu * press:
                         stuck = 1
                         v = ti.Vector.zero(m.fp, 3)
                     else:
@@ -292,12 +331,13 @@ class Implicit(Integrator):
                         # a step under Coulomb friction alone: at the start's alone, a sheet starting to slide down a
                         # slope was held 10-40 % more; at the end's alone, a particle its neighbours hold back
                         # stopped, and with it the sheet
-                        press = ti.max(fn, 0.0)
+                        press = ti.max(press, 0.0)
                         end = (v + h * m.inv_mass[i] * ft).norm() - h * m.inv_mass[i] * mu * press
                         drag = h * mu * press / ti.max(ti.max(end, slide), eps)
             self.pcg.q[i] = w + v  # scratch: the new velocity
             c.released[i] = released
             c.stuck[i] = stuck
+            c.crease[i] = crease
             self.system.extra_mass[i] = drag
         ti.loop_config(serialize=self.model.serial)
         for i in range(m.n_particles[None]):

@@ -186,7 +186,7 @@ class SpringMultigrid:
         self.mass_scale = blk.scalar(fp, ())              # 1 + h gamma of the current step
         self.level = blk.scalar(ti.i32, ())               # the active level
         self.weight = blk.scalar(fp, ())                  # omega
-        self.nrm = blk.vector(3, fp, N)                   # unit normal of a sliding contact (simulated level), or 0
+        self.proj = blk.matrix(3, 3, fp, N)               # the contact filter S (simulated level; I elsewhere)
         self.extra = blk.scalar(fp, N)                    # the system's extra_mass (simulated level), or 0 [kg]
         blk.finalize(self)
         self.omega = float(omega)
@@ -270,9 +270,9 @@ class SpringMultigrid:
 
     @ti.func
     def _filtered(self, g, vec):
-        """vec without its component along vertex g's sliding-contact normal (none off the simulated level)."""
-        n = self.nrm[g]
-        return vec - n.dot(vec) * n
+        """S vec: vec without its components along vertex g's sliding-contact normals (none off the simulated
+        level)."""
+        return self.proj[g] @ vec
 
     @ti.func
     def _apply_A(self, g):
@@ -314,7 +314,7 @@ class SpringMultigrid:
             for i in range(system.gated(self._count(l))):
                 g = ti.static(int(self.offsets[l])) + i
                 fixed = 0
-                nrm = ti.Vector.zero(self.fp, 3)
+                S = ti.Matrix.identity(self.fp, 3)
                 extra = ti.cast(0.0, self.fp)
                 if l == active:
                     fixed = ti.select(filt.model.inv_mass[i] == 0, 1, 0)
@@ -322,11 +322,10 @@ class SpringMultigrid:
                     if ti.static(filt.has_contacts):
                         if filt.contacts.stuck[i] != 0:
                             fixed = 1
-                        n = ti.cast(filt.contacts.sliding_normal(i), self.fp)
-                        if n.dot(n) > 0:
-                            nrm = n / n.norm()
+                        else:
+                            S = ti.cast(filt.contacts.projector(i), self.fp)
                 self.pin[g] = fixed
-                self.nrm[g] = nrm
+                self.proj[g] = S
                 self.extra[g] = extra
         for k in ti.static(range(L - 1)):
             l = ti.static(L - 1 - k)  # from the finest down: level l marks the parents on level l - 1
@@ -345,10 +344,8 @@ class SpringMultigrid:
                 g = ti.static(int(self.offsets[l])) + i
                 inv = ti.Matrix.zero(self.fp, 3, 3)
                 if self.pin[g] == 0:
-                    # on a sliding contact the block of the filtered system: S D S + m'(I - S), S = I - n n^T
-                    n = self.nrm[g]
-                    S = ti.Matrix.identity(self.fp, 3) - n.outer_product(n)
-                    inv = filtered_block(S, self._block(g, mass_scale), self.mass[g] * mass_scale).inverse()
+                    # on a sliding contact the block of the filtered system: S D S + m'(I - S)
+                    inv = filtered_block(self.proj[g], self._block(g, mass_scale), self.mass[g] * mass_scale).inverse()
                 self.dinv[g] = inv
         # the coarsest level's matrix (pinned rows: identity), each vertex its three rows; factored L L^T in one
         # thread on the CPU (elsewhere: prepare, by factor_in_parallel)
