@@ -30,7 +30,8 @@ change in the solve, the collider handles it). A contact the force pulls off the
 filtered), for leaving only: the line search removes from every candidate the velocity into the body it would give
 such a particle, and a particle it had to correct is held (filtered) in any further Newton iteration (an active set).
 Friction at a contact is in the solve too: a sticking particle is held (S_i = 0), a sliding one carries a dashpot of
-the force mu lambda at its speed (_contact_friction).
+the force mu lambda at its speed, and one in a crease of the body (its contact alternating between two faces) is held
+against both faces' normals (_contact_friction).
 """
 
 import taichi as ti
@@ -255,7 +256,8 @@ class Implicit(Integrator):
               in the step, and friction only dissipates.
         Applied after the solve instead, as a velocity cut at the next step's start, the solve moved a sliding
         particle by its whole force in every step: a skirt on a loose waistband crept down the body at 0.5 mm/s
-        in stick-slip bursts for 10 s (docs/garments.md). Velocities are relative to the contact's surface
+        in stick-slip bursts for 10 s (docs/garments.md). In a crease (below) the particle is held against a second
+        normal too, and lambda is the force of both faces. Velocities are relative to the contact's surface
         (Contacts.velocity: a moving collider's). The velocities change in a second pass, after every force was
         read at the old ones."""
         m, s, c = self.model, self.state, self.contacts
