@@ -32,6 +32,8 @@ from taichi.lang.misc import is_arch_supported
 
 from clothbase.errors import warn
 
+from . import taichi_frontend
+
 _ARCHS = {"cpu": ti.cpu, "gpu": ti.gpu, "cuda": ti.cuda, "vulkan": ti.vulkan}
 _current_arch: str | None = None
 _saves_cache_at_exit = False
@@ -68,6 +70,7 @@ def init(arch: str = "cpu", parallel_from: int | None = None, **kwargs) -> None:
         # wide, so a drape's last bits, and with them a chaotic outcome, followed the CPU model (and it bought no
         # speed: the demo T-shirt ran 0.97x the time without it; docs/performance.md, reproducible runs)
         kwargs.setdefault("fast_math", False)
+    taichi_frontend.install()
     if kwargs["offline_cache"]:
         clear_stale_cache_lock(Path(kwargs.get("offline_cache_file_path") or cache_folder()))
     ti.init(arch=gpu_arch() if arch == "gpu" else _ARCHS[arch], **kwargs)

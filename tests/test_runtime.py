@@ -67,3 +67,65 @@ def test_the_vulkan_probe_reads_its_child_process(monkeypatch, probe, usable):
     assert runtime.vulkan_device_usable() is usable
     monkeypatch.setattr(runtime, "_VULKAN_PROBE", "import sys; sys.exit(5)")
     assert runtime.vulkan_device_usable() is usable  # asked once
+
+
+def test_the_front_end_without_wrapping_points_where_taichi_s_own_does_and_reads_a_source_once(monkeypatch):
+    """taichi_cloth.taichi_frontend: the position message of every node of a kernel equals Taichi's own (lines under
+    80 columns: nothing to wrap); a compile error names the line and marks the name; a function's source is read
+    once however often it is inlined."""
+    import ast
+    import inspect
+    import textwrap
+
+    import taichi as ti
+    from taichi.lang.ast.ast_transformer_utils import ASTTransformerContext
+
+    import taichi_cloth as tc
+    from taichi_cloth import taichi_frontend
+
+    tc.init("cpu")
+    assert taichi_frontend.install()  # runtime.init installed it (Taichi 1.7)
+    assert ASTTransformerContext.get_pos_info is taichi_frontend.get_pos_info
+    original = taichi_frontend._ORIGINAL_GET_POS_INFO
+
+    class Context:  # what get_pos_info reads of Taichi's context
+        def __init__(self, func):
+            self.src = textwrap.dedent(inspect.getsource(func)).split("\n")
+            self.file, self.lineno_offset, self.indent = "f.py", 0, 0
+            self.func = type("F", (), {"func": func})
+
+    def sample(a, b):
+        for i in range(a):
+            if i > b and (a
+                          + b) > 0:
+                a += b * i
+        return a
+
+    ctx = Context(sample)
+    nodes = [n for n in ast.walk(ast.parse("\n".join(ctx.src))) if isinstance(n, (ast.stmt, ast.expr))]
+    assert len(nodes) > 20
+    for node in nodes:
+        assert taichi_frontend.get_pos_info(ctx, node).replace(" \n", "\n").rstrip() \
+            == original(ctx, node).replace(" \n", "\n").rstrip()
+
+    x = ti.field(ti.f32, 4)
+
+    @ti.func
+    def helper(i):
+        return x[i % 4] * 2.0
+
+    @ti.kernel
+    def fill():
+        for i in x:
+            x[i] = helper(i) + helper(i + 1) + not_defined_anywhere  # noqa: F821
+
+    from taichi.lang import _wrap_inspect
+    reads = []
+    read = _wrap_inspect.getsourcelines
+    monkeypatch.setattr(_wrap_inspect, "getsourcelines", lambda f: reads.append(f.__name__) or read(f))
+    with pytest.raises(ti.TaichiNameError) as error:
+        fill()
+    message = str(error.value)
+    assert "x[i] = helper(i) + helper(i + 1) + not_defined_anywhere" in message
+    assert "^" * len("not_defined_anywhere") in message
+    assert sorted(reads) == ["fill", "helper"]  # helper is inlined twice (the error is raised at the second)
