@@ -8,11 +8,11 @@ offline cache, whose keys come from that IR) it
   * reads and tokenises a function's source file again each time the function is inlined (`inspect.getsourcelines`
     for every call site of every `ti.func`).
 Profiled on a cold compile of the implicit step with self-collision (docs/performance.md, the test suite), the two
-took 8.9 s and 2.3 s of 18.4 s of AST transformation. `install` replaces the formatting with one that gives the same
+took 8.9 s and 2.1 s of 18.4 s of AST transformation. `install` replaces the formatting with one that gives the same
 message without the wrapping (a code line longer than 80 columns stays one line: errors still point at the code),
 and reads each function's source once per process (the AST is still parsed for every inlining: the transformer
-writes into it). It applies only to the Taichi versions this was read on (1.7); elsewhere Taichi is left as it is, and so it is
-with TAICHI_CLOTH_TAICHI_FRONTEND=plain (to measure the difference).
+writes into it). It applies only to the Taichi versions this was read on (1.7); elsewhere Taichi is left as it
+is, and so it is with TAICHI_CLOTH_TAICHI_FRONTEND=plain (to measure the difference).
 """
 from __future__ import annotations
 
@@ -21,6 +21,9 @@ import os
 import textwrap
 
 import taichi as ti
+import taichi.lang._wrap_inspect as wrap_inspect
+from taichi.lang import kernel_impl
+from taichi.lang.ast import ast_transformer_utils
 
 #: the Taichi versions whose ASTTransformerContext.get_pos_info this replaces (read on 1.7.4)
 VERSIONS = ((1, 7),)
@@ -81,29 +84,27 @@ def _source(func):
     key = getattr(func, "__code__", func)  # functions made by one factory share their code and their source
     found = _sources.get(key)
     if found is None:
-        from taichi.lang._wrap_inspect import getsourcefile, getsourcelines
-        src, start_lineno = getsourcelines(func)
+        src, start_lineno = wrap_inspect.getsourcelines(func)
         src = [textwrap.fill(line, tabsize=4, width=9999) for line in src]
-        found = _sources[key] = (getsourcefile(func), src, start_lineno, textwrap.dedent("\n".join(src)))
+        found = _sources[key] = (wrap_inspect.getsourcefile(func), src, start_lineno, textwrap.dedent("\n".join(src)))
     return found
 
 
 def get_tree_and_ctx(self, excluded_parameters=(), is_kernel=True, arg_features=None, args=None, ast_builder=None,
                      is_real_function=False):
     """Taichi 1.7's kernel_impl._get_tree_and_ctx with the function's source read once (_source)."""
-    from taichi.lang.ast.ast_transformer_utils import ASTTransformerContext
-    from taichi.lang.kernel_impl import _get_global_vars
     file, src, start_lineno, text = _source(self.func)
     tree = ast.parse(text)
     tree.body[0].decorator_list = []
-    global_vars = _get_global_vars(self.func)
+    global_vars = kernel_impl._get_global_vars(self.func)
     if is_kernel or is_real_function:
         for i in self.template_slot_locations:  # template parameters are globals of the kernel's body
             global_vars[self.arguments[i].name] = args[i]
-    return tree, ASTTransformerContext(excluded_parameters=excluded_parameters, is_kernel=is_kernel, func=self,
-                                       arg_features=arg_features, global_vars=global_vars, argument_data=args,
-                                       src=src, start_lineno=start_lineno, file=file, ast_builder=ast_builder,
-                                       is_real_function=is_real_function)
+    context = ast_transformer_utils.ASTTransformerContext
+    return tree, context(excluded_parameters=excluded_parameters, is_kernel=is_kernel, func=self,
+                         arg_features=arg_features, global_vars=global_vars, argument_data=args, src=src,
+                         start_lineno=start_lineno, file=file, ast_builder=ast_builder,
+                         is_real_function=is_real_function)
 
 
 def install() -> bool:
@@ -114,8 +115,6 @@ def install() -> bool:
         return True
     if tuple(ti.__version__[:2]) not in VERSIONS or os.environ.get("TAICHI_CLOTH_TAICHI_FRONTEND") == "plain":
         return False
-    from taichi.lang import kernel_impl
-    from taichi.lang.ast import ast_transformer_utils
     context = getattr(ast_transformer_utils, "ASTTransformerContext", None)
     if (context is None or not hasattr(context, "get_pos_info") or not hasattr(kernel_impl, "_get_tree_and_ctx")
             or not hasattr(kernel_impl, "_get_global_vars")):
