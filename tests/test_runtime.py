@@ -70,7 +70,7 @@ def test_the_vulkan_probe_reads_its_child_process(monkeypatch, probe, usable):
 
 
 def test_the_front_end_without_wrapping_points_where_taichi_s_own_does_and_reads_a_source_once(monkeypatch):
-    """taichi_cloth.taichi_frontend: the position message of every node of a kernel equals Taichi's own (lines under
+    """taichi_cloth.taichi_frontend: the position message of every node of a function equals Taichi's own (lines under
     80 columns: nothing to wrap); a compile error names the line and marks the name; a function's source is read
     once however often it is inlined."""
     import ast
@@ -128,4 +128,4 @@ def test_the_front_end_without_wrapping_points_where_taichi_s_own_does_and_reads
     message = str(error.value)
     assert "x[i] = helper(i) + helper(i + 1) + not_defined_anywhere" in message
     assert "^" * len("not_defined_anywhere") in message
-    assert sorted(reads) == ["fill", "helper"]  # helper is inlined twice (the error is raised at the second)
+    assert sorted(reads) == ["fill", "helper"]  # helper is inlined twice before the error, its source read once
