@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from taichi_cloth.errors import PatternError
-from taichi_cloth.garment.dxf import read_dxf, write_dxf
+from taichi_cloth.garment.dxf import dxf_units, read_dxf, write_dxf
+from taichi_cloth.garment.garmentfile import load_garment
 from taichi_cloth.garment.pattern import (
     PatternPiece,
     Segment,
@@ -367,3 +368,101 @@ def test_dxf_gap_and_bad_files(tmp_path):
         read_dxf(tmp_path / "empty.dxf")
     with pytest.raises(PatternError, match="layer name"):
         write_dxf([PatternPiece.from_polygon("a/b", [[0, 0], [1, 0], [0, 1]])], tmp_path / "x.dxf")
+
+
+# ------------------------------------------------------------------------------ AAMA / ASTM D6673 pattern files
+
+#: a T-shirt front's outline [in] as pattern CAD draws it: hem, side, armhole, shoulder, neck, centre front
+FRONT_IN = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 17.0], [7.5, 23.0], [3.0, 24.5], [0.0, 22.0]])
+
+
+def aama_file(path, scale: float = 1.0, units_text: str | None = None, insunits: int = 0):
+    """A pattern file laid out as AAMA / ASTM D6673 CAD exports it: no $INSUNITS (unless `insunits`), the piece a
+    block (FRONT) inserted in model space, its outline on the boundary layer 1 in FRONT_IN x `scale` (file
+    units), a grade-rule label "# n" at each turn point on layer 2 (two of them "# 0"), a grain line on layer 7,
+    a piece-name annotation on layer 1 off the outline, the text "neck" on layer 1 at the neck corner, "side" on
+    layer 2 at the armhole's; `units_text` a model-space TEXT ("Units: ENGLISH")."""
+    doc = ezdxf.new("R2000" if insunits else "R12")  # R12, as pattern CAD writes it, has no $INSUNITS
+    doc.header["$INSUNITS"] = insunits
+    block = doc.blocks.new("FRONT")
+    pts = FRONT_IN * scale
+    block.add_polyline2d([tuple(p) for p in pts], close=True, dxfattribs={"layer": "1"})
+    for k, (p, rule) in enumerate(zip(pts, [0, 0, 2, 5, 7, 9])):
+        block.add_text(f"# {rule}", dxfattribs={"layer": "2", "insert": tuple(p)})
+    block.add_line(tuple(pts[0] + [5 * scale, 5 * scale]), tuple(pts[0] + [5 * scale, 15 * scale]),
+                   dxfattribs={"layer": "7"})
+    block.add_text("Piece Name: FRONT", dxfattribs={"layer": "1", "insert": tuple(pts[0] + [2 * scale, 8 * scale])})
+    block.add_text("neck", dxfattribs={"layer": "1", "insert": tuple(pts[4])})
+    block.add_text("side", dxfattribs={"layer": "2", "insert": tuple(pts[2])})
+    msp = doc.modelspace()
+    msp.add_blockref("FRONT", (0, 0))
+    if units_text:
+        msp.add_text(units_text, dxfattribs={"layer": "0", "insert": (-20 * scale, -5 * scale)})
+    doc.saveas(path)
+    return path
+
+
+@pytest.mark.parametrize("units_text, scale, metres", [("Units: ENGLISH", 1.0, 0.0254), ("UNITS: METRIC", 25.4, 0.001),
+                                                       ("units = inch", 1.0, 0.0254)])
+def test_an_aama_file_without_insunits_loads_at_its_true_size_from_its_units_text(tmp_path, units_text, scale, metres):
+    path = aama_file(tmp_path / "front.dxf", scale, units_text)
+    assert dxf_units(path) == {0.0254: "in", 0.001: "mm"}[metres]
+    (front,) = read_dxf(path)
+    assert front.name == "FRONT"
+    np.testing.assert_allclose(front.corners, FRONT_IN * scale * metres, rtol=0, atol=1e-12)
+    assert front.corners[:, 1].max() == pytest.approx(24.5 * 0.0254, abs=1e-12)  # 62.2 cm, a T-shirt front
+    # names from boundary-layer texts only; grade-rule labels ("# 0" twice) are not names and do not clash
+    assert front.corner_names == ["c0", "c1", "c2", "c3", "neck", "c5"]
+
+
+def test_an_inch_file_without_any_unit_is_refused_in_one_line_and_loads_when_told(tmp_path):
+    path = aama_file(tmp_path / "front.dxf")
+    for read in (read_dxf, dxf_units):
+        with pytest.raises(PatternError) as info:
+            read(path)
+        msg = str(info.value)
+        assert "\n" not in msg and "front.dxf" in msg and "'FRONT'" in msg and "no unit" in msg, msg
+        assert "2.65 cm across" in msg and "inches would make it 67 cm" in msg and "one of m, cm, mm, in (read_dxf's units=, a garment file's dxf_units)" in msg, msg
+    (front,) = read_dxf(path, units="in")
+    np.testing.assert_allclose(front.corners, FRONT_IN * 0.0254, rtol=0, atol=1e-12)
+    with pytest.raises(PatternError, match="units must be one of m, cm, mm, in, got 'inch'"):
+        read_dxf(path, units="inch")
+
+
+def test_a_file_without_any_unit_of_a_garment_s_size_in_mm_is_read_in_mm(tmp_path):
+    path = aama_file(tmp_path / "front.dxf", scale=25.4)
+    assert dxf_units(path) == "mm"
+    (front,) = read_dxf(path)
+    np.testing.assert_allclose(front.corners, FRONT_IN * 0.0254, rtol=0, atol=1e-12)
+    # $INSUNITS comes first: a file that says cm in its header is read in cm whatever its text says
+    path = aama_file(tmp_path / "cm.dxf", scale=2.54, units_text="Units: ENGLISH", insunits=5)
+    assert dxf_units(path) == "cm"
+    np.testing.assert_allclose(read_dxf(path)[0].corners, FRONT_IN * 0.0254, rtol=0, atol=1e-12)
+
+
+def test_a_units_text_that_names_no_unit_or_two_units_is_refused(tmp_path):
+    with pytest.raises(PatternError, match=r"'Units: FURLONGS' names no length unit we read"):
+        read_dxf(aama_file(tmp_path / "a.dxf", units_text="Units: FURLONGS"))
+    path = aama_file(tmp_path / "b.dxf", units_text="Units: ENGLISH")
+    doc = ezdxf.readfile(path)
+    doc.blocks.get("FRONT").add_text("Units: METRIC", dxfattribs={"layer": "1", "insert": (50, 50)})
+    doc.saveas(path)
+    with pytest.raises(PatternError, match=r"name two units \('Units: ENGLISH' and 'Units: METRIC'\)"):
+        read_dxf(path)
+
+
+def test_a_garment_file_passes_its_dxf_s_units(tmp_path):
+    aama_file(tmp_path / "front.dxf")
+    text = ('name = "front"\nunits = "cm"\nspacing = 2.0\ndxf = "front.dxf"\n{units}\n'
+            '[[pieces]]\nname = "FRONT"\nplacement = {{ origin = [0, 1, 0] }}\n')
+    (tmp_path / "g.toml").write_text(text.format(units='dxf_units = "in"'))
+    (front,) = load_garment(tmp_path / "g.toml").pieces
+    np.testing.assert_allclose(front.corners, FRONT_IN * 0.0254, rtol=0, atol=1e-12)
+    (tmp_path / "g.toml").write_text(text.format(units=""))
+    with pytest.raises(PatternError, match=r"g.toml: .*front.dxf: the file gives no unit"):
+        load_garment(tmp_path / "g.toml")
+    (tmp_path / "g.toml").write_text(text.format(units='dxf_units = "in"').replace('dxf = "front.dxf"\n', "")
+                                     .replace('name = "FRONT"', 'name = "FRONT"\noutline = [{ at = [0, 0] }, '
+                                              '{ at = [10, 0] }, { at = [0, 10] }]'))
+    with pytest.raises(PatternError, match="dxf_units is the unit of the file `dxf` names"):
+        load_garment(tmp_path / "g.toml")

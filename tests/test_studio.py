@@ -11,6 +11,7 @@ import tomllib
 import warnings
 from pathlib import Path
 
+import ezdxf
 import numpy as np
 import pytest
 
@@ -457,3 +458,30 @@ def test_placement_picture_shows_the_pieces_in_their_colours(folder):
     # the front piece's colour (#7fa7d9), shaded: many pixels near its hue
     r, g, b = (img[..., k].astype(int) for k in range(3))
     assert ((b > r + 40) & (b > g + 10)).mean() > 0.02
+
+
+def test_a_dxf_without_units_opens_in_the_unit_the_page_gives_and_saves_it(folder):
+    doc = ezdxf.new("R12")  # pattern CAD's layout: the piece a block on layer 1, no $INSUNITS, inches
+    block = doc.blocks.new("FRONT")
+    block.add_polyline2d([(0, 0), (10, 0), (10, 17), (7.5, 23), (3, 24.5), (0, 22)], close=True,
+                         dxfattribs={"layer": "1"})
+    doc.modelspace().add_blockref("FRONT", (0, 0))
+    doc.saveas(folder / "front.dxf")
+    c = client(folder)
+    before = ok(c.get("/api/state"))
+    r = c.post("/api/open", json={"path": "front.dxf"})
+    assert r.status_code == 400 and "no unit" in r.json()["error"] and "dxf_units" in r.json()["error"], r.text
+    assert "\n" not in r.json()["error"] and ok(c.get("/api/state"))["version"] == before["version"]
+    assert c.post("/api/open", json={"path": "front.dxf", "units": "inch"}).status_code == 400
+    state = ok(c.post("/api/open", json={"path": "front.dxf", "units": "in"}))["state"]
+    assert state["units"] == "in" and [p["name"] for p in state["pieces"]] == ["FRONT"]
+    assert state["pieces"][0]["sides"][0]["length"] == pytest.approx(10.0, abs=1e-3)  # the hem: 10 in
+    ok(c.post("/api/save", json={"path": "front.toml"}))
+    saved = tomllib.loads((folder / "front.toml").read_text(encoding="utf-8"))
+    assert saved["dxf"] == "front.dxf" and saved["dxf_units"] == "in" and saved["units"] == "in"
+    assert ok(c.post("/api/open", json={"path": "front.toml"}))["state"]["pieces"][0]["sides"][0]["length"] == \
+        pytest.approx(10.0, abs=1e-3)
+    data = (folder / "front.dxf").read_bytes()
+    assert c.post("/api/upload", files={"file": ("up.dxf", data)}).status_code == 400
+    r = ok(c.post("/api/upload", files={"file": ("up.dxf", data)}, data={"units": "in"}))
+    assert r["kept"] == "up.dxf" and r["state"]["units"] == "in"

@@ -22,8 +22,15 @@ Reading (`read_dxf`):
     into closed loops; an entity whose ends meet (or a closed entity) is a loop by itself. A layer with
     several loops gives pieces "layer", "layer.1", "layer.2", ... in file order; an open end that matches
     nothing is a PatternError naming the file, the layer and the gap (in the file's units).
-  * Units: the `units` argument if given, else $INSUNITS (1 in, 4 mm, 5 cm, 6 m); unitless (0) is read as mm
-    (the usual pattern-CAD export unit). Pieces are returned in metres.
+  * Units: the `units` argument if given, else $INSUNITS (1 in, 4 mm, 5 cm, 6 m), else a "Units: ..." TEXT
+    anywhere in the file, as AAMA/ASTM D6673 pattern CAD writes it instead of $INSUNITS ("ENGLISH" inches,
+    "METRIC" millimetres; also "INCH", "MM", "CM", "M"). A file with neither is read as millimetres (the usual
+    pattern-CAD export unit) if its largest piece is then 10 cm to 5 m across, and refused otherwise with one
+    PatternError naming the size and the unit options (an inch file read as mm is 25.4x too small: a T-shirt
+    front 2.8 cm across). Pieces are returned in metres.
+  * Corner names: in an AAMA block (one with entities on the boundary layer "1"), only the texts on layer "1"
+    name corners; anywhere, a text that is an AAMA grade-rule label ("# 12") is not a name, and a name that two
+    corners of one piece would share is given to the first, the second keeping its default "c<i>".
   * Tolerance [m]: default 1e-5 * the bounding-box diagonal of the layer's (or block's) entities. Chained
     ends are then snapped together exactly (the movable end of a line/polyline/arc/clamped spline moves).
 
@@ -35,6 +42,7 @@ the corner. A round trip gives back equal pieces (a zero-bulge "arc" reads back 
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -52,6 +60,17 @@ __all__ = ["dxf_units", "read_dxf", "write_dxf"]
 _INSUNITS_TO_UNITS = {0: "mm", 1: "in", 4: "mm", 5: "cm", 6: "m"}
 _UNITS_TO_INSUNITS = {"in": 1, "mm": 4, "cm": 5, "m": 6}
 _AAMA_BOUNDARY_LAYER = "1"
+#: the words a "Units:" text may give, and the unit each means (ASTM D6673: ENGLISH inches, METRIC millimetres)
+_UNITS_WORDS = {"english": "in", "inch": "in", "inches": "in", "in": "in", "metric": "mm", "mm": "mm",
+                "millimeter": "mm", "millimeters": "mm", "millimetre": "mm", "millimetres": "mm", "cm": "cm",
+                "centimeter": "cm", "centimeters": "cm", "centimetre": "cm", "centimetres": "cm", "m": "m",
+                "meter": "m", "meters": "m", "metre": "m", "metres": "m"}
+_UNITS_TEXT = re.compile(r"^\s*units?\s*[:=]\s*(\S+)\s*$", re.IGNORECASE)
+_GRADE_RULE_TEXT = re.compile(r"^\s*#\s*\d+\s*$")
+#: the span [m] a garment's largest pattern piece lies in, to tell whether a file without units is in mm
+PLAUSIBLE_PIECE_SIZE = (0.10, 5.0)
+#: how a user gives a DXF file's unit, said in every message about a missing or unreadable one
+_GIVE_UNITS = f"give the file's unit, one of {', '.join(UNITS)} (read_dxf's units=, a garment file's dxf_units)"
 _VTX_SPLINE_FRAME = 16  # POLYLINE vertex flag: spline frame control point, not part of the drawn curve
 
 
@@ -96,7 +115,7 @@ def read_dxf(path, units: str | None = None, tolerance: float | None = None) -> 
     """
     path = Path(path)
     doc = _open(path)
-    scale, unit_name = _file_units(doc, path, units)
+    scale, unit_name, assumed = _file_units(doc, path, units)
     if tolerance is not None and not (tolerance > 0 and math.isfinite(tolerance)):
         raise PatternError(f"{path}: tolerance must be > 0, got {tolerance!r}")
     pieces: list[PatternPiece] = []
@@ -112,14 +131,20 @@ def read_dxf(path, units: str | None = None, tolerance: float | None = None) -> 
     if not pieces:
         raise PatternError(f"{path}: no pattern pieces found (no closed outline on any layer or in any "
                            f"inserted block)")
+    if assumed:
+        _check_plausible(pieces, path)
     return pieces
 
 
 def dxf_units(path) -> str:
     """The length unit read_dxf reads the DXF file at `path` in when given none ("m", "cm", "mm" or "in": from
-    $INSUNITS, unitless read as mm); PatternError naming the file if it cannot be read or its unit is unsupported."""
+    $INSUNITS, else a "Units:" text, else mm when its pieces are of a garment's size); PatternError naming the
+    file if it cannot be read, its unit is unsupported, or it has none and is not of a garment's size in mm."""
     path = Path(path)
-    return _file_units(_open(path), path, None)[1]
+    _, name, assumed = _file_units(_open(path), path, None)
+    if assumed:
+        read_dxf(path)  # refuses a file whose pieces are not of a garment's size in mm
+    return name
 
 
 def _open(path: Path):
@@ -132,15 +157,55 @@ def _open(path: Path):
         raise PatternError(f"{path} is not a readable DXF file ({why})") from None
 
 
-def _file_units(doc, path: Path, units: str | None) -> tuple[float, str]:
-    """(metres per file unit, unit name)."""
+def _file_units(doc, path: Path, units: str | None) -> tuple[float, str, bool]:
+    """(metres per file unit, unit name, whether the unit is only assumed: no units given, none in the file)."""
     if units is not None:
-        return unit_scale(units), units
+        if units not in UNITS:
+            raise PatternError(f"{path}: units must be one of {', '.join(UNITS)}, got {units!r}")
+        return UNITS[units], units, False
     code = doc.header.get("$INSUNITS", 0)
     if code not in _INSUNITS_TO_UNITS:
-        raise PatternError(f"{path}: unsupported $INSUNITS = {code}; pass units= one of {', '.join(UNITS)}")
-    name = _INSUNITS_TO_UNITS[code]
-    return UNITS[name], name
+        raise PatternError(f"{path}: unsupported $INSUNITS = {code}: {_GIVE_UNITS}")
+    if code:
+        name = _INSUNITS_TO_UNITS[code]
+        return UNITS[name], name, False
+    name = _units_text(doc, path)
+    return (UNITS[name], name, False) if name else (UNITS["mm"], "mm", True)
+
+
+def _units_text(doc, path: Path) -> str | None:
+    """The unit a "Units: ENGLISH" (or METRIC, INCH, MM, CM, M) TEXT or MTEXT in the model space or a block
+    names, or None if there is none; PatternError if one names no unit we know or two disagree."""
+    found: dict[str, str] = {}
+    layouts = [doc.modelspace(), *doc.blocks]
+    for layout in layouts:
+        for e in layout.query("TEXT MTEXT"):
+            label = e.plain_text() if e.dxftype() == "MTEXT" else str(e.dxf.text)
+            m = _UNITS_TEXT.match(label)
+            if m is None:
+                continue
+            word = m.group(1).lower()
+            if word not in _UNITS_WORDS:
+                raise PatternError(f"{path}: the text {label.strip()!r} names no length unit we read (ENGLISH, "
+                                   f"METRIC, INCH, MM, CM, M): {_GIVE_UNITS}")
+            found.setdefault(_UNITS_WORDS[word], label.strip())
+    if len(found) > 1:
+        raise PatternError(f"{path}: its texts name two units ({' and '.join(map(repr, found.values()))}): "
+                           f"{_GIVE_UNITS}")
+    return next(iter(found), None)
+
+
+def _check_plausible(pieces: list, path: Path) -> None:
+    """Refuse a file without units whose largest piece, read in mm, is not of a garment's size."""
+    largest = max(pieces, key=lambda p: p.size())
+    lo, hi = PLAUSIBLE_PIECE_SIZE
+    size = largest.size()
+    if lo <= size <= hi:
+        return
+    guess = " (inches would make it {:.0f} cm)".format(100 * size / UNITS["mm"] * UNITS["in"]) if size < lo else ""
+    raise PatternError(f"{path}: the file gives no unit ($INSUNITS unset, no 'Units:' text), and read as "
+                       f"millimetres its largest piece, {largest.name!r}, is {100 * size:.3g} cm across, "
+                       f"{'smaller' if size < lo else 'larger'} than any garment piece{guess}: {_GIVE_UNITS}")
 
 
 def _sources(doc) -> list:
@@ -151,7 +216,7 @@ def _sources(doc) -> list:
         if e.dxftype() == "INSERT":
             ents = list(_flatten(e))
             if any(x.dxf.layer == _AAMA_BOUNDARY_LAYER and not _is_text(x) for x in ents):
-                ents = [x for x in ents if _is_text(x) or x.dxf.layer == _AAMA_BOUNDARY_LAYER]
+                ents = [x for x in ents if x.dxf.layer == _AAMA_BOUNDARY_LAYER]
             blocks.append(_Source("block", e.dxf.name, ents))
         else:
             layers.setdefault(e.dxf.layer, _Source("layer", e.dxf.layer, [])).entities.append(e)
@@ -362,7 +427,9 @@ def _text(e, scale: float):
         pts = [_xy(ocs.to_wcs(e.dxf.insert))]
         if e.dxf.hasattr("align_point"):
             pts.append(_xy(ocs.to_wcs(e.dxf.align_point)))
-    return (np.array(pts) * scale, label) if label else None
+    if not label or _GRADE_RULE_TEXT.match(label) or _UNITS_TEXT.match(label):
+        return None
+    return np.array(pts) * scale, label
 
 
 # -- chaining --------------------------------------------------------------------------------------------
@@ -431,10 +498,13 @@ def _snap(segs: list) -> list:
 
 
 def _corner_names(segs: list, texts: list, tol: float) -> list:
-    """Corner names from texts lying on corners (nearest corner within tol, first text wins); else "c<i>"."""
+    """Corner names from texts lying on corners (nearest corner within tol, first text wins; a name already given
+    to a corner of this loop is not given again); else "c<i>"."""
     corners = np.array([s.start for s in segs])
     names = [None] * len(segs)
     for pts, label in texts:
+        if label in names:
+            continue
         d = np.linalg.norm(corners[:, None, :] - pts[None, :, :], axis=2).min(axis=1)
         for i in np.argsort(d, kind="stable"):
             if d[i] > tol:

@@ -12,6 +12,8 @@ material and placement of a garment; every length is in the file's `units`.
     # dxf = "skirt.dxf"           # pieces from a DXF file: a [[pieces]] entry without `outline` takes the DXF
                                   # piece of its name (layer or block); `corners = { hem_left = 0, ... }` names
                                   # its corners
+    # dxf_units = "in"            # the DXF's unit when the file gives none or a wrong one (default: its
+                                  # $INSUNITS, else its "Units:" text, else mm if its pieces are of a garment's size)
 
     [[pieces]]
     name = "front"
@@ -62,6 +64,7 @@ GARMENT_SCHEMA = Table({
     "resolution": Field("str", None, choices=tuple(RESOLUTIONS)),
     "levels": Field("int", 1, lambda v: None if 1 <= v <= 6 else "must lie in 1..6"),
     "dxf": Field("str", None),
+    "dxf_units": Field("str", None, choices=("m", "cm", "mm", "in")),
     "pieces": Array(Table({
         "name": Field("str"), "outline": Field("tables", None), "copy": Field("str", None),
         "mirror": Field("bool", False), "corners": Field("names", None),
@@ -86,8 +89,8 @@ def load_garment(path, material: Material | None = None) -> GarmentSpec:
 def garment_from_dict(data: dict, path, material: Material | None = None, dxf_reader=None) -> GarmentSpec:
     """The GarmentSpec of a garment file's parsed content `data` (what tomllib gives), checked as load_garment
     checks a file: as if it were the file at `path`, which names it in every message and whose folder a relative
-    `dxf` is read from. `dxf_reader(path) -> [PatternPiece]` reads the DXF (default read_dxf; the pattern studio
-    passes one that keeps what it has read, since it checks the set-up after every edit)."""
+    `dxf` is read from. `dxf_reader(path, units=None) -> [PatternPiece]` reads the DXF (default read_dxf; the
+    pattern studio passes one that keeps what it has read, since it checks the set-up after every edit)."""
     path = Path(path)
     label = str(path)
     cfg = Validator(label, PatternError).table(GARMENT_SCHEMA, data, "", "")
@@ -124,7 +127,10 @@ def _spec(cfg: dict, path: Path, material: Material | None, dxf_reader=None) -> 
             from .dxf import read_dxf as dxf_reader  # ezdxf (0.5 s to import): only a garment drawn in a DXF file
 
         dxf_path = Path(cfg["dxf"])
-        dxf_pieces = {p.name: p for p in dxf_reader(dxf_path if dxf_path.is_absolute() else path.parent / dxf_path)}
+        dxf_path = dxf_path if dxf_path.is_absolute() else path.parent / dxf_path
+        dxf_pieces = {p.name: p for p in dxf_reader(dxf_path, units=cfg["dxf_units"])}
+    elif cfg["dxf_units"] is not None:
+        raise PatternError("dxf_units is the unit of the file `dxf` names: give dxf too, or leave dxf_units out")
     pieces, placements = {}, {}
     for k, p in enumerate(cfg["pieces"]):
         where = f"[[pieces]] #{k + 1} ({p['name']!r})"

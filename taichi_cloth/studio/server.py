@@ -148,7 +148,7 @@ def create_app(root, start: str | None = None, drape_command=None, anchors=None)
 
     async def open_file(request):
         data = await _json(request)
-        return await call(studio.session.open, data.get("path"))
+        return await call(studio.session.open, data.get("path"), data.get("units") or None)
 
     async def upload(request):
         size = request.headers.get("content-length")
@@ -181,7 +181,9 @@ def create_app(root, start: str | None = None, drape_command=None, anchors=None)
         kept = []
 
         def open_upload():
-            kept.append(studio.session.open_upload(item.filename or "", data))
+            units = form.get("units")
+            kept.append(studio.session.open_upload(item.filename or "", data, units if isinstance(units, str) and units
+                                                   else None))
             return {"kept": kept[0]}
 
         return await call(open_upload)

@@ -104,16 +104,17 @@ class Session:
         self._layout = (None, None)
 
     # ------------------------------------------------------------------------------------------ reading files
-    def _read_dxf(self, path) -> list:
-        """read_dxf, kept while the file is unchanged (every edit checks the set-up, which names the DXF)."""
+    def _read_dxf(self, path, units: str | None = None) -> list:
+        """read_dxf, kept while the file and the units are unchanged (every edit checks the set-up, which names the
+        DXF)."""
         path = Path(path)
         if not path.resolve().is_relative_to(self.folder.root):
             raise Refused(f"{path.name}: refused: the DXF file lies outside the studio's folder {self.folder.root}",
                           403)
         st = path.stat() if path.is_file() else None
-        key = (str(path.resolve()), st.st_mtime_ns, st.st_size) if st else None
+        key = (str(path.resolve()), st.st_mtime_ns, st.st_size, units) if st else None
         if key is None or key not in self._dxf_cache:
-            pieces = read_dxf(path)
+            pieces = read_dxf(path, units=units)
             if key is None:
                 return pieces
             self._dxf_cache = {key: pieces}
@@ -123,16 +124,17 @@ class Session:
         """An error's message with the folder's own path left out (the page names files relative to it)."""
         return str(exc).replace(str(self.folder.root) + os.sep, "").replace(str(self.folder.root), ".")
 
-    def doc_from_dxf(self, path: Path) -> dict:
+    def doc_from_dxf(self, path: Path, units: str | None = None) -> dict:
         """A new set-up from a DXF file: its pieces, a first placement each (guess_anchor), no seams, cotton, the
-        DXF's own units, DEFAULT_SPACING."""
-        units = dxf_units(path)
-        pieces = self._read_dxf(path)
-        scale = unit_scale(units)
-        return {"name": path.stem, "dxf": self.folder.relative(path), "units": units, "material": "cotton",
-                "spacing": round(DEFAULT_SPACING / scale, 9),
-                "pieces": [{"name": p.name, "placement": {"anchor": guess_anchor(p.name)}} for p in pieces],
-                "seams": []}
+        DXF's own units (or `units`, kept as the set-up's dxf_units, for a file that gives none), DEFAULT_SPACING."""
+        pieces = self._read_dxf(path, units)
+        name = units or dxf_units(path)
+        scale = unit_scale(name)
+        doc = {"name": path.stem, "dxf": self.folder.relative(path), "units": name, "material": "cotton",
+               "spacing": round(DEFAULT_SPACING / scale, 9),
+               "pieces": [{"name": p.name, "placement": {"anchor": guess_anchor(p.name)}} for p in pieces],
+               "seams": []}
+        return doc if units is None else {**doc, "dxf_units": units}
 
     def doc_from_toml(self, path: Path) -> dict:
         """The set-up of a garment file, its `dxf` made relative to the folder (refused if it leads outside)."""
@@ -190,11 +192,12 @@ class Session:
             raise Refused("no pattern open: open a DXF or garment file first", 409)
         return copy.deepcopy(self.doc)
 
-    def open(self, relative: str) -> None:
-        """Open a DXF pattern or a garment file under the folder (undo goes back to what was open before)."""
+    def open(self, relative: str, units: str | None = None) -> None:
+        """Open a DXF pattern or a garment file under the folder (undo goes back to what was open before); `units`:
+        a DXF's unit where the file gives none ("m", "cm", "mm" or "in"; None: the file's own)."""
         with self.lock:
             path = self.folder.resolve(relative, suffixes=(".dxf", ".toml"), must_exist=True)
-            doc = self.doc_from_dxf(path) if path.suffix.lower() == ".dxf" else self.doc_from_toml(path)
+            doc = self.doc_from_dxf(path, units) if path.suffix.lower() == ".dxf" else self.doc_from_toml(path)
             old_target = self.target
             self.target = self.folder.relative(path) if path.suffix.lower() == ".toml" else None
             try:
@@ -206,10 +209,10 @@ class Session:
             if self.target is not None:
                 self.saved_version = self.version
 
-    def open_upload(self, name: str, data: bytes) -> str:
+    def open_upload(self, name: str, data: bytes, units: str | None = None) -> str:
         """Open a DXF pattern or garment file sent from the page: checked first under a temporary name, then kept
         in the folder as `name` (or name-2, name-3...: nothing is overwritten). A file that does not open is
-        removed again and changes nothing. Returns its name in the folder."""
+        removed again and changes nothing. `units` as for open. Returns its name in the folder."""
         with self.lock:
             name = Path(str(name).replace("\\", "/")).name
             suffix = Path(name).suffix.lower()
@@ -218,7 +221,7 @@ class Session:
             tmp = self.folder.root / f".studio-upload{suffix}"
             tmp.write_bytes(data)
             try:
-                doc = self.doc_from_dxf(tmp) if suffix == ".dxf" else self.doc_from_toml(tmp)
+                doc = self.doc_from_dxf(tmp, units) if suffix == ".dxf" else self.doc_from_toml(tmp)
                 if suffix == ".dxf":
                     doc["name"] = Path(name).stem
                 self.check(doc)

@@ -574,7 +574,7 @@ function wire() {
     const path = $("open-path").value.trim() || $("open-list").value;
     if (!path) { say("choose a file to open", "error"); return; }
     pick = null;
-    const r = await api("POST", "/api/open", {path});
+    const r = await api("POST", "/api/open", {path, units: $("open-units").value || null});
     if (r && r.state) say(`opened ${path}`, "info");
   });
   $("upload-input").addEventListener("change", async (ev) => {
@@ -582,6 +582,7 @@ function wire() {
     if (!file) return;
     const form = new FormData();
     form.append("file", file, file.name);
+    if ($("open-units").value) form.append("units", $("open-units").value);
     const r = await api("POST", "/api/upload", form);
     ev.target.value = "";
     if (r && r.state) { say(`opened ${r.kept} (uploaded)`, "info"); listFiles(); }
