@@ -1,4 +1,5 @@
 """2D pattern pieces (taichi_cloth.garment.pattern) and their DXF import/export (taichi_cloth.garment.dxf)."""
+import dataclasses
 import math
 
 import ezdxf
@@ -447,7 +448,7 @@ def test_a_units_text_that_names_no_unit_or_two_units_is_refused(tmp_path):
     doc = ezdxf.readfile(path)
     doc.blocks.get("FRONT").add_text("Units: METRIC", dxfattribs={"layer": "1", "insert": (50, 50)})
     doc.saveas(path)
-    with pytest.raises(PatternError, match=r"name two units \('Units: ENGLISH' and 'Units: METRIC'\)"):
+    with pytest.raises(PatternError, match=r"give two units \('Units: ENGLISH' and 'Units: METRIC'\)"):
         read_dxf(path)
 
 
@@ -464,5 +465,83 @@ def test_a_garment_file_passes_its_dxf_s_units(tmp_path):
     (tmp_path / "g.toml").write_text(text.format(units='dxf_units = "in"').replace('dxf = "front.dxf"\n', "")
                                      .replace('name = "FRONT"', 'name = "FRONT"\noutline = [{ at = [0, 0] }, '
                                               '{ at = [10, 0] }, { at = [0, 10] }]'))
-    with pytest.raises(PatternError, match="dxf_units is the unit of the file `dxf` names"):
+    with pytest.raises(PatternError, match="dxf_units is about the file `dxf` names"):
         load_garment(tmp_path / "g.toml")
+
+
+#: the whole front FRONT_IN unfolds to across its centre front x = 0 [in], and its corner names
+WHOLE_IN = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 17.0], [7.5, 23.0], [3.0, 24.5], [0.0, 22.0], [-3.0, 24.5],
+                     [-7.5, 23.0], [-10.0, 17.0], [-10.0, 0.0]])
+WHOLE_NAMES = ["c0", "c1", "c2", "c3", "c4", "c5", "c4_mirror", "c3_mirror", "c2_mirror", "c1_mirror"]
+SIDEWAYS = np.array([[0.0, 1.0], [-1.0, 0.0]])  # p -> (y, -x): up becomes +x, as pattern CAD lays a piece down
+
+
+def graded_file(path, sizes=(("S", 0.95), ("M", 1.0), ("L", 1.05)), sample: str | None = "M"):
+    """A graded AAMA file in inches: a block FRONT_<size> per size holding the half front FRONT_IN x its grade,
+    laid on its side (SIDEWAYS), the centre front on the fold (layer 6), the grain line (layer 7) along the
+    piece's up, the size as a "Size:" text in each block; model-space texts "Units: ENGLISH" and "Sample Size:"."""
+    doc = ezdxf.new("R12")
+    msp = doc.modelspace()
+    for k, (size, grade) in enumerate(sizes):
+        block = doc.blocks.new(f"FRONT_{size}")
+        block.add_polyline2d([tuple(SIDEWAYS @ p * grade) for p in FRONT_IN], close=True, dxfattribs={"layer": "1"})
+        block.add_line(tuple(SIDEWAYS @ [0, 0]), tuple(SIDEWAYS @ [0, 22 * grade]), dxfattribs={"layer": "6"})
+        block.add_line(tuple(SIDEWAYS @ [5, 5]), tuple(SIDEWAYS @ [5, 15]), dxfattribs={"layer": "7"})
+        block.add_text(f"Size: {size}", dxfattribs={"layer": "1", "insert": tuple(SIDEWAYS @ [4, 10])})
+        msp.add_blockref(f"FRONT_{size}", (0, 0))
+    msp.add_text("Units: ENGLISH", dxfattribs={"insert": (-40, 0)})
+    if sample:
+        msp.add_text(f"Sample Size: {sample}", dxfattribs={"insert": (-40, -5)})
+    doc.saveas(path)
+    return path
+
+
+def test_a_graded_file_gives_its_sample_size_upright_and_unfolded_and_any_size_by_name(tmp_path):
+    path = graded_file(tmp_path / "graded.dxf")
+    (front,) = read_dxf(path)
+    assert front.name == "FRONT" and front.corner_names == WHOLE_NAMES
+    np.testing.assert_allclose(front.corners, WHOLE_IN * 0.0254, rtol=0, atol=1e-12)
+    half = PatternPiece.from_polygon("half", FRONT_IN, units="in")
+    assert front.area() == pytest.approx(2 * half.area(), rel=1e-12) and front.orientation == half.orientation
+    (large,) = read_dxf(path, size="L")
+    np.testing.assert_allclose(large.corners, WHOLE_IN * 0.0254 * 1.05, rtol=0, atol=1e-12)
+    with pytest.raises(PatternError, match=r"no size 'XL' in the file; its sizes are S, M, L"):
+        read_dxf(path, size="XL")
+    # as drawn: the half on its side, its grain and fold lines kept (metres)
+    (drawn,) = read_dxf(path, as_drawn=True)
+    np.testing.assert_allclose(drawn.corners, FRONT_IN @ SIDEWAYS.T * 0.0254, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(drawn.grain, [[5 * 0.0254, -5 * 0.0254], [15 * 0.0254, -5 * 0.0254]], atol=1e-12)
+    np.testing.assert_allclose(drawn.fold, [[0, 0], [22 * 0.0254, 0]], atol=1e-12)
+    # without a sample size, a graded file asks for one
+    with pytest.raises(PatternError, match=r"graded file \(sizes S, M, L\) without a 'Sample Size:' text"):
+        read_dxf(graded_file(tmp_path / "nosample.dxf", sample=None))
+    with pytest.raises(PatternError, match="not graded"):
+        read_dxf(aama_file(tmp_path / "plain.dxf", units_text="Units: ENGLISH"), size="M")
+
+
+def test_upright_follows_the_grain_line_and_unfolding_refuses_a_fold_off_the_outline():
+    square = PatternPiece.from_polygon("sq", [[0, 0], [2, 0], [2, 1], [0, 1]])
+    down = dataclasses.replace(square, grain=((1.0, 1.0), (1.0, 0.0)))  # drawn pointing down: turned half round
+    np.testing.assert_allclose(down.upright().corners, -square.corners, atol=1e-15)
+    np.testing.assert_allclose(down.upright(rotate=90).corners, square.corners @ SIDEWAYS, atol=1e-15)
+    assert square.upright() is square  # no grain line: as drawn
+    off = dataclasses.replace(square, fold=((0.5, -1.0), (0.5, 2.0)))
+    with pytest.raises(PatternError, match="'sq': its fold line .* is not an edge of its outline"):
+        off.unfolded()
+    with pytest.raises(PatternError, match="'sq' has no fold line"):
+        square.unfolded()
+    whole = dataclasses.replace(square, fold=((0.0, 0.0), (0.0, 1.0))).unfolded()
+    assert whole.area() == pytest.approx(4.0, rel=1e-12)
+    np.testing.assert_allclose(whole.corners, [[0, 0], [2, 0], [2, 1], [0, 1], [-2, 1], [-2, 0]], atol=1e-15)
+
+
+def test_a_garment_file_picks_a_size_and_keeps_a_half_or_turns_a_piece(tmp_path):
+    graded_file(tmp_path / "graded.dxf")
+    text = ('name = "front"\nunits = "in"\nspacing = 1.0\ndxf = "graded.dxf"\n{top}\n'
+            '[[pieces]]\nname = "FRONT"\nplacement = {{ origin = [0, 40, 0] }}\n{piece}\n')
+    cases = (("", "", WHOLE_IN), ('dxf_size = "S"', "", WHOLE_IN * 0.95),
+             ("", "unfold = false", FRONT_IN), ("", "unfold = false\nrotate = 0", FRONT_IN @ SIDEWAYS.T))
+    for top, piece, corners in cases:
+        (tmp_path / "g.toml").write_text(text.format(top=top, piece=piece))
+        (front,) = load_garment(tmp_path / "g.toml").pieces
+        np.testing.assert_allclose(front.corners, corners * 0.0254, rtol=0, atol=1e-12, err_msg=f"{top} {piece}")

@@ -28,6 +28,11 @@ Reading (`read_dxf`):
     pattern-CAD export unit) if its largest piece is then 10 cm to 5 m across, and refused otherwise with one
     PatternError naming the size and the unit options (an inch file read as mm is 25.4x too small: a T-shirt
     front 2.8 cm across). Pieces are returned in metres.
+  * AAMA / ASTM D6673 markings of a block: its grain line (layer 7) and fold or mirror line (layer 6), the
+    longest LINE on each, become the piece's `grain` and `fold`; unless `as_drawn`, a half on a fold is unfolded
+    into the whole piece (PatternPiece.unfolded) and every piece is turned so its grain line runs up (upright).
+    A graded file (a "Size: M" text in each block, or blocks named <piece>_<size> with a "Sample Size: M" text)
+    gives the pieces of one size, named without it: `size`, else the sample size.
   * Corner names: in an AAMA block (one with entities on the boundary layer "1"), only the texts on layer "1"
     name corners; anywhere, a text that is an AAMA grade-rule label ("# 12") is not a name, and a name that two
     corners of one piece would share is given to the first, the second keeping its default "c<i>".
@@ -41,6 +46,7 @@ the corner. A round trip gives back equal pieces (a zero-bulge "arc" reads back 
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import re
 from dataclasses import dataclass
@@ -67,6 +73,9 @@ _UNITS_WORDS = {"english": "in", "inch": "in", "inches": "in", "in": "in", "metr
                 "meter": "m", "meters": "m", "metre": "m", "metres": "m"}
 _UNITS_TEXT = re.compile(r"^\s*units?\s*[:=]\s*(\S+)\s*$", re.IGNORECASE)
 _GRADE_RULE_TEXT = re.compile(r"^\s*#\s*\d+\s*$")
+_SIZE_TEXT = re.compile(r"^\s*size\s*[:=]\s*(\S+)\s*$", re.IGNORECASE)
+_SAMPLE_SIZE_TEXT = re.compile(r"^\s*(?:sample|base)\s+size\s*[:=]\s*(\S+)\s*$", re.IGNORECASE)
+_AAMA_FOLD_LAYER, _AAMA_GRAIN_LAYER = "6", "7"
 #: the span [m] a garment's largest pattern piece lies in, to tell whether a file without units is in mm
 PLAUSIBLE_PIECE_SIZE = (0.10, 5.0)
 #: how a user gives a DXF file's unit, said in every message about a missing or unreadable one
@@ -96,44 +105,87 @@ class _Chunk:
 
 @dataclass
 class _Source:
-    """The entities of one would-be piece: a model-space layer or an inserted block."""
+    """The entities of one would-be piece: a model-space layer or an inserted block; for a block, its grain and
+    fold lines ((2, 2) in file units, the longest on AAMA layers 7 and 6) and its "Size:" text."""
 
     kind: str  # "layer" | "block"
     name: str
     entities: list
+    grain: np.ndarray | None = None
+    fold: np.ndarray | None = None
+    size: str | None = None
 
 
 # ----------------------------------------------------------------------------------------------------------
 # reading
 # ----------------------------------------------------------------------------------------------------------
 
-def read_dxf(path, units: str | None = None, tolerance: float | None = None) -> list:
+def read_dxf(path, units: str | None = None, tolerance: float | None = None, size: str | None = None,
+             as_drawn: bool = False) -> list:
     """Pattern pieces (list[PatternPiece], metres) from the DXF file at `path` (see the module docstring).
 
     units: "m" | "cm" | "mm" | "in" to override the file's $INSUNITS; tolerance [m]: endpoint matching and
-    text-to-corner distance (default 1e-5 * the size of each layer or block).
+    text-to-corner distance (default 1e-5 * the size of each layer or block); size: the size of a graded file to
+    read (default its "Sample Size:"); as_drawn: the pieces as the file draws them, with their grain and fold
+    lines, instead of each half on a fold unfolded and each piece turned upright (PatternPiece.unfolded, upright).
     """
     path = Path(path)
     doc = _open(path)
     scale, unit_name, assumed = _file_units(doc, path, units)
     if tolerance is not None and not (tolerance > 0 and math.isfinite(tolerance)):
         raise PatternError(f"{path}: tolerance must be > 0, got {tolerance!r}")
-    pieces: list[PatternPiece] = []
-    used: set[str] = set()
+    found: list[tuple[PatternPiece, str | None]] = []
     for src in _sources(doc):
-        for name, loop, names, tol in _source_loops(src, path, scale, unit_name, tolerance):
-            piece = PatternPiece(_unique_name(name, used), loop, names)
+        loops = _source_loops(src, path, scale, unit_name, tolerance)
+        for name, loop, names, tol in loops:
+            lines = [None if line is None or len(loops) > 1 else _line_tuple(line * scale)
+                     for line in (src.grain, src.fold)]
+            piece = PatternPiece(name, loop, names, *lines)
             try:
                 piece.validate(tolerance=tol)
             except PatternError as exc:
                 raise PatternError(f"{path}: {src.kind} '{src.name}': {exc}") from None
-            pieces.append(piece)
-    if not pieces:
+            found.append((piece, src.size))
+    if not found:
         raise PatternError(f"{path}: no pattern pieces found (no closed outline on any layer or in any "
                            f"inserted block)")
+    pieces = _of_size(found, size, _key_text(doc, path, _SAMPLE_SIZE_TEXT, "sample sizes"), path)
     if assumed:
         _check_plausible(pieces, path)
+    used: set[str] = set()
+    pieces = [dataclasses.replace(p, name=_unique_name(p.name, used)) for p in pieces]
+    if not as_drawn:
+        pieces = [(p.unfolded() if p.fold is not None else p).upright() for p in pieces]
     return pieces
+
+
+def _of_size(found: list, size: str | None, sample: str | None, path: Path) -> list:
+    """The pieces of one size of a graded file (a block's "Size:" text, else, in a file with a "Sample Size:"
+    text, the end of a block named <piece>_<size>), named without the size; every piece of a file not graded."""
+    sized = []
+    for piece, own in found:
+        base, _, tail = piece.name.rpartition("_")
+        own = own or (tail if sample is not None and base else None)
+        if own is not None and piece.name.endswith(f"_{own}"):
+            piece = dataclasses.replace(piece, name=piece.name[:-len(own) - 1])
+        sized.append((piece, own))
+    sizes = list(dict.fromkeys(own for _, own in sized if own is not None))
+    if not sizes:
+        if size is not None:
+            raise PatternError(f"{path}: size {size!r} asked for, but the file is not graded (no 'Size:' or "
+                               f"'Sample Size:' text)")
+        return [p for p, _ in sized]
+    want = size if size is not None else sample
+    if want is None:
+        raise PatternError(f"{path}: a graded file (sizes {', '.join(sizes)}) without a 'Sample Size:' text: give "
+                           f"the size to read (read_dxf's size=, a garment file's dxf_size)")
+    if want not in sizes:
+        raise PatternError(f"{path}: no size {want!r} in the file; its sizes are {', '.join(sizes)}")
+    return [p for p, own in sized if own is None or own == want]
+
+
+def _line_tuple(points: np.ndarray) -> tuple:
+    return tuple((float(x), float(y)) for x, y in points)
 
 
 def dxf_units(path) -> str:
@@ -173,26 +225,38 @@ def _file_units(doc, path: Path, units: str | None) -> tuple[float, str, bool]:
     return (UNITS[name], name, False) if name else (UNITS["mm"], "mm", True)
 
 
+def _label(e) -> str:
+    return e.plain_text() if e.dxftype() == "MTEXT" else str(e.dxf.text)
+
+
+def _key_text(doc, path: Path, pattern: re.Pattern, what: str) -> str | None:
+    """The value of the "Key: value" TEXTs or MTEXTs matching `pattern` in the model space or any block, or None
+    if there is none; PatternError naming `what` if two give different values."""
+    found: dict[str, str] = {}
+    for layout in (doc.modelspace(), *doc.blocks):
+        for e in layout.query("TEXT MTEXT"):
+            m = pattern.match(_label(e))
+            if m is not None:
+                found.setdefault(m.group(1), _label(e).strip())
+    if len(found) > 1:
+        raise PatternError(f"{path}: its texts give two {what} ({' and '.join(map(repr, found.values()))})")
+    return next(iter(found), None)
+
+
 def _units_text(doc, path: Path) -> str | None:
     """The unit a "Units: ENGLISH" (or METRIC, INCH, MM, CM, M) TEXT or MTEXT in the model space or a block
     names, or None if there is none; PatternError if one names no unit we know or two disagree."""
-    found: dict[str, str] = {}
-    layouts = [doc.modelspace(), *doc.blocks]
-    for layout in layouts:
+    for layout in (doc.modelspace(), *doc.blocks):
         for e in layout.query("TEXT MTEXT"):
-            label = e.plain_text() if e.dxftype() == "MTEXT" else str(e.dxf.text)
-            m = _UNITS_TEXT.match(label)
-            if m is None:
-                continue
-            word = m.group(1).lower()
-            if word not in _UNITS_WORDS:
-                raise PatternError(f"{path}: the text {label.strip()!r} names no length unit we read (ENGLISH, "
+            m = _UNITS_TEXT.match(_label(e))
+            if m is not None and m.group(1).lower() not in _UNITS_WORDS:
+                raise PatternError(f"{path}: the text {_label(e).strip()!r} names no length unit we read (ENGLISH, "
                                    f"METRIC, INCH, MM, CM, M): {_GIVE_UNITS}")
-            found.setdefault(_UNITS_WORDS[word], label.strip())
-    if len(found) > 1:
-        raise PatternError(f"{path}: its texts name two units ({' and '.join(map(repr, found.values()))}): "
-                           f"{_GIVE_UNITS}")
-    return next(iter(found), None)
+    try:
+        word = _key_text(doc, path, _UNITS_TEXT, "units")
+    except PatternError as exc:
+        raise PatternError(f"{exc}: {_GIVE_UNITS}") from None
+    return None if word is None else _UNITS_WORDS[word.lower()]
 
 
 def _check_plausible(pieces: list, path: Path) -> None:
@@ -215,12 +279,34 @@ def _sources(doc) -> list:
     for e in doc.modelspace():
         if e.dxftype() == "INSERT":
             ents = list(_flatten(e))
+            grain, fold = (_longest_line(x for x in ents if x.dxf.layer == layer)
+                           for layer in (_AAMA_GRAIN_LAYER, _AAMA_FOLD_LAYER))
+            size = next((m.group(1) for x in ents if _is_text(x) for m in [_SIZE_TEXT.match(_label(x))] if m), None)
             if any(x.dxf.layer == _AAMA_BOUNDARY_LAYER and not _is_text(x) for x in ents):
                 ents = [x for x in ents if x.dxf.layer == _AAMA_BOUNDARY_LAYER]
-            blocks.append(_Source("block", e.dxf.name, ents))
+            blocks.append(_Source("block", e.dxf.name, ents, grain, fold, size))
         else:
             layers.setdefault(e.dxf.layer, _Source("layer", e.dxf.layer, [])).entities.append(e)
     return list(layers.values()) + blocks
+
+
+def _longest_line(entities) -> np.ndarray | None:
+    """(2, 2) [file units] the longest LINE (or a POLYLINE's first to last vertex) among `entities`, or None."""
+    best, longest = None, 0.0
+    for e in entities:
+        kind = e.dxftype()
+        if kind == "LINE":
+            pts = np.array([_xy(e.dxf.start), _xy(e.dxf.end)])
+        elif kind in ("LWPOLYLINE", "POLYLINE"):
+            vertices = [_xy(v) for v in (e.vertices_in_wcs() if kind == "LWPOLYLINE" else e.points())]
+            if len(vertices) < 2:
+                continue
+            pts = np.array([vertices[0], vertices[-1]])
+        else:
+            continue
+        if np.linalg.norm(pts[1] - pts[0]) > longest:
+            best, longest = pts, float(np.linalg.norm(pts[1] - pts[0]))
+    return best
 
 
 def _flatten(insert, depth: int = 0):
@@ -427,7 +513,7 @@ def _text(e, scale: float):
         pts = [_xy(ocs.to_wcs(e.dxf.insert))]
         if e.dxf.hasattr("align_point"):
             pts.append(_xy(ocs.to_wcs(e.dxf.align_point)))
-    if not label or _GRADE_RULE_TEXT.match(label) or _UNITS_TEXT.match(label):
+    if not label or any(p.match(label) for p in (_GRADE_RULE_TEXT, _UNITS_TEXT, _SIZE_TEXT, _SAMPLE_SIZE_TEXT)):
         return None
     return np.array(pts) * scale, label
 

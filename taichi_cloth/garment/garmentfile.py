@@ -14,6 +14,7 @@ material and placement of a garment; every length is in the file's `units`.
                                   # its corners
     # dxf_units = "in"            # the DXF's unit when the file gives none or a wrong one (default: its
                                   # $INSUNITS, else its "Units:" text, else mm if its pieces are of a garment's size)
+    # dxf_size = "M"              # the size of a graded DXF (default: its "Sample Size:")
 
     [[pieces]]
     name = "front"
@@ -26,6 +27,8 @@ material and placement of a garment; every length is in the file's `units`.
     placement = { anchor = "waist_front", at = [0, 60], offset = 2, wrap = true }   # also height, angle [deg]
     # placement = { origin = [0, 100, 0], u_axis = [1, 0, 0], v_axis = [0, 1, 0], at = [0, 0] }: flat, no body
     # copy = "front", mirror = true: the outline of another piece (mirrored left-right)
+    # a DXF piece is turned so that its grain line runs up (rotate = 90: turned 90 degrees counter-clockwise
+    # instead), and a half on a fold is unfolded into the whole piece (unfold = false: kept as the half)
 
     [[seams]]                     # pick each side from one corner to another: point i meets point i
     name = "left side"
@@ -65,9 +68,11 @@ GARMENT_SCHEMA = Table({
     "levels": Field("int", 1, lambda v: None if 1 <= v <= 6 else "must lie in 1..6"),
     "dxf": Field("str", None),
     "dxf_units": Field("str", None, choices=("m", "cm", "mm", "in")),
+    "dxf_size": Field("str", None),
     "pieces": Array(Table({
         "name": Field("str"), "outline": Field("tables", None), "copy": Field("str", None),
-        "mirror": Field("bool", False), "corners": Field("names", None),
+        "mirror": Field("bool", False), "corners": Field("names", None), "rotate": Field("number", None),
+        "unfold": Field("bool", True),
         "placement": Table({"anchor": Field("str", None), "at": Field("vec2", None),
                             "offset": Field("number", None, nonneg), "wrap": Field("bool", True),
                             "height": Field("number", 0.0), "angle": Field("number", 0.0),
@@ -128,9 +133,12 @@ def _spec(cfg: dict, path: Path, material: Material | None, dxf_reader=None) -> 
 
         dxf_path = Path(cfg["dxf"])
         dxf_path = dxf_path if dxf_path.is_absolute() else path.parent / dxf_path
-        dxf_pieces = {p.name: p for p in dxf_reader(dxf_path, units=cfg["dxf_units"])}
-    elif cfg["dxf_units"] is not None:
-        raise PatternError("dxf_units is the unit of the file `dxf` names: give dxf too, or leave dxf_units out")
+        dxf_pieces = {p.name: p for p in dxf_reader(dxf_path, units=cfg["dxf_units"], size=cfg["dxf_size"],
+                                                    as_drawn=True)}
+    else:
+        for key in ("dxf_units", "dxf_size"):
+            if cfg[key] is not None:
+                raise PatternError(f"{key} is about the file `dxf` names: give dxf too, or leave {key} out")
     pieces, placements = {}, {}
     for k, p in enumerate(cfg["pieces"]):
         where = f"[[pieces]] #{k + 1} ({p['name']!r})"
@@ -150,6 +158,7 @@ def _spec(cfg: dict, path: Path, material: Material | None, dxf_reader=None) -> 
                 raise PatternError(f"{where}: the DXF file has no piece {p['name']!r} (it has "
                                    f"{', '.join(dxf_pieces)})")
             piece = dxf_pieces[p["name"]]
+            piece = (piece.unfolded() if p["unfold"] and piece.fold is not None else piece).upright(p["rotate"])
         else:
             raise PatternError(f"{where}: needs an outline (or copy, or a dxf file at the top level)")
         if p["mirror"] and p["copy"] is None:

@@ -447,6 +447,13 @@ class Segment:
         of travel is kept (the piece-level mirror re-orients the loop)."""
         return self._with_points(self.points * np.array([-1.0, 1.0]), bulge=-self.bulge)
 
+    def mapped(self, matrix, offset=(0.0, 0.0)) -> "Segment":
+        """Moved by p -> matrix @ p + offset, matrix (2, 2) a rotation or a reflection (orthogonal). A reflection
+        (det < 0) flips the turning sense: an arc's bulge is negated; the direction of travel is kept."""
+        m = np.asarray(matrix, dtype=np.float64)
+        return self._with_points(self.points @ m.T + _point(offset, "offset"),
+                                 bulge=-self.bulge if np.linalg.det(m) < 0 else self.bulge)
+
     def _moved_end(self, which: int, p: np.ndarray) -> "Segment":
         """Copy with its start (which=0) or end (which=-1) moved to p; only for movable ends (see dxf)."""
         pts = self.points.copy()
@@ -482,7 +489,10 @@ class PatternPiece:
     """A closed outline of segments: segments[i].end == segments[i+1].start, and the last segment ends at the
     first one's start. Either direction is accepted (`orientation` tells which); corner i is segments[i].start.
 
-    name: str; segments: list[Segment]; corner_names: list[str] (len == len(segments); default "c0", "c1", ...)
+    name: str; segments: list[Segment]; corner_names: list[str] (len == len(segments); default "c0", "c1", ...);
+    grain, fold: the piece's grain line and fold (mirror) line as drawn, ((x0, y0), (x1, y1)) [m] or None: what
+    `upright` turns v along and `unfolded` mirrors the piece across (the DXF reader sets them from AAMA layers 7
+    and 6).
 
     The plain constructor does not validate (so broken pieces can be built and inspected); the from_*
     constructors and the DXF reader call `validate()`.
@@ -491,6 +501,8 @@ class PatternPiece:
     name: str
     segments: list
     corner_names: list = field(default_factory=list)
+    grain: tuple | None = None
+    fold: tuple | None = None
 
     def __post_init__(self):
         self.name = str(self.name)
@@ -696,12 +708,83 @@ class PatternPiece:
             segs = [segs[n - 1 - j].reversed() for j in range(n)]
             names = [names[(n - j) % n] for j in range(n)]
         segs = [s.translated(offset) for s in segs]
-        return PatternPiece(self.name if name is None else name, segs, names)
+
+        def move(line):
+            return None if line is None else _line(scale * np.asarray(line) * ([-1.0, 1.0] if mirror else 1.0)
+                                                   + _point(offset, "offset"))
+
+        return PatternPiece(self.name if name is None else name, segs, names, move(self.grain), move(self.fold))
+
+
+    def rotated(self, angle: float) -> "PatternPiece":
+        """Copy turned by `angle` [deg] counter-clockwise about the origin (grain and fold lines with it)."""
+        a = math.radians(float(angle))
+        m = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
+        def turn(line):
+            return None if line is None else _line(np.asarray(line) @ m.T)
+
+        return PatternPiece(self.name, [s.mapped(m) for s in self.segments], list(self.corner_names),
+                            turn(self.grain), turn(self.fold))
+
+    def upright(self, rotate: float | None = None) -> "PatternPiece":
+        """The piece turned so that its grain line runs along +v (from the line's first point to its second),
+        or by `rotate` [deg] counter-clockwise when given; unchanged without either. Pattern CAD often lays a
+        piece on its side: its grain line, not its outline, says which way is up."""
+        if rotate is not None:
+            return self.rotated(rotate)
+        if self.grain is None:
+            return self
+        (x0, y0), (x1, y1) = self.grain
+        return self.rotated(90.0 - math.degrees(math.atan2(y1 - y0, x1 - x0)))
+
+    def unfolded(self, tolerance: float | None = None) -> "PatternPiece":
+        """The whole piece of a half drawn on a fold: the outline without its edge on the fold line, then its
+        mirror image across that line (corner `name` mirrored as `name_mirror`; the two corners on the fold keep
+        their names). PatternError naming the piece when it has no fold line or the line is not an edge of it.
+        tolerance [m]: how far an edge's ends may lie off the fold line (default 1e-6 of the piece's size)."""
+        if self.fold is None:
+            raise PatternError(f"pattern piece '{self.name}' has no fold line to unfold")
+        a, b = (np.asarray(p, dtype=np.float64) for p in self.fold)
+        d = (b - a) / max(np.linalg.norm(b - a), 1e-300)
+        normal = np.array([-d[1], d[0]])
+        tol = 1e-6 * self.size() if tolerance is None else tolerance
+        n = len(self.segments)
+        on = [s.kind in ("line", "polyline") and bool(np.all(np.abs((s.points - a) @ normal) <= tol))
+              for s in self.segments]
+        if not any(on) or all(on):
+            raise PatternError(f"pattern piece '{self.name}': its fold line from {tuple(np.round(a, 4))} to "
+                               f"{tuple(np.round(b, 4))} m is not an edge of its outline")
+        # the run of edges on the fold, cyclically: from corner p (its start) to corner q (its end)
+        start = next(i for i in range(n) if on[i] and not on[i - 1])
+        end = start
+        while on[(end + 1) % n]:
+            end = (end + 1) % n
+        if sum(on) != (end - start) % n + 1:
+            raise PatternError(f"pattern piece '{self.name}': its outline meets the fold line in more than one "
+                               f"stretch, so it is not a half on a fold")
+        first = (end + 1) % n
+        order = [(first + k) % n for k in range(n - sum(on))]
+        half = [self.segments[i] for i in order]
+        names = [self.corner_names[i] for i in order]
+        mirror = np.eye(2) - 2.0 * np.outer(normal, normal)
+        offset = a - mirror @ a
+        back = [s.mapped(mirror, offset).reversed() for s in reversed(half)]
+        # the fold's two corners are shared: make the junctions exact
+        back[0] = back[0]._moved_end(0, half[-1].end) if back[0].end_movable(0) else back[0]
+        back[-1] = back[-1]._moved_end(-1, half[0].start) if back[-1].end_movable(-1) else back[-1]
+        back_names = [self.corner_names[start]] + [f"{nm}_mirror" for nm in reversed(names[1:])]
+        return PatternPiece(self.name, half + back, names + back_names, self.grain, None)
 
 
 # ----------------------------------------------------------------------------------------------------------
 # helpers
 # ----------------------------------------------------------------------------------------------------------
+
+def _line(points) -> tuple:
+    """((x0, y0), (x1, y1)) of a (2, 2) array, as plain floats."""
+    (x0, y0), (x1, y1) = np.asarray(points, dtype=np.float64)
+    return (float(x0), float(y0)), (float(x1), float(y1))
+
 
 def _points_array(value, where: str) -> np.ndarray:
     try:

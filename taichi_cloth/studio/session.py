@@ -104,17 +104,17 @@ class Session:
         self._layout = (None, None)
 
     # ------------------------------------------------------------------------------------------ reading files
-    def _read_dxf(self, path, units: str | None = None) -> list:
-        """read_dxf, kept while the file and the units are unchanged (every edit checks the set-up, which names the
-        DXF)."""
+    def _read_dxf(self, path, units: str | None = None, size: str | None = None, as_drawn: bool = False) -> list:
+        """read_dxf, kept while the file and the options are unchanged (every edit checks the set-up, which names
+        the DXF)."""
         path = Path(path)
         if not path.resolve().is_relative_to(self.folder.root):
             raise Refused(f"{path.name}: refused: the DXF file lies outside the studio's folder {self.folder.root}",
                           403)
         st = path.stat() if path.is_file() else None
-        key = (str(path.resolve()), st.st_mtime_ns, st.st_size, units) if st else None
+        key = (str(path.resolve()), st.st_mtime_ns, st.st_size, units, size, as_drawn) if st else None
         if key is None or key not in self._dxf_cache:
-            pieces = read_dxf(path, units=units)
+            pieces = read_dxf(path, units=units, size=size, as_drawn=as_drawn)
             if key is None:
                 return pieces
             self._dxf_cache = {key: pieces}
