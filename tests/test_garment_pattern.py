@@ -545,3 +545,40 @@ def test_a_garment_file_picks_a_size_and_keeps_a_half_or_turns_a_piece(tmp_path)
         (tmp_path / "g.toml").write_text(text.format(top=top, piece=piece))
         (front,) = load_garment(tmp_path / "g.toml").pieces
         np.testing.assert_allclose(front.corners, corners * 0.0254, rtol=0, atol=1e-12, err_msg=f"{top} {piece}")
+
+
+def bezier(p0, c, p1, n: int) -> np.ndarray:
+    """(n + 1, 2) points of the quadratic Bezier p0, c, p1."""
+    t = np.linspace(0, 1, n + 1)[:, None]
+    return (1 - t) ** 2 * np.array(p0) + 2 * t * (1 - t) * np.array(c) + t ** 2 * np.array(p1)
+
+
+#: the half front FRONT_IN as one closed boundary polyline, as CLO exports it: its armhole and neck curves drawn
+#: with 30 and 20 short edges (vertices every 1-4 mm)
+DENSE_IN = np.vstack([[[0.0, 0.0], [10.0, 0.0]], bezier((10, 17), (8, 19), (7.5, 23), 30),
+                      bezier((3, 24.5), (2.5, 22), (0, 22), 20)])
+
+
+@pytest.mark.parametrize("marked", [True, False])
+def test_an_aama_outline_has_corners_at_its_turn_points_and_notches_not_at_every_vertex(tmp_path, marked):
+    doc = ezdxf.new("R12")
+    block = doc.blocks.new("FRONT")
+    block.add_polyline2d([tuple(p) for p in DENSE_IN], close=True, dxfattribs={"layer": "1"})
+    if marked:  # turn points: grade-rule labels on layer 2
+        for k, p in enumerate(FRONT_IN):
+            block.add_text(f"# {k}", dxfattribs={"layer": "2", "insert": tuple(p)})
+    side_notch = (10.0, 8.0)
+    arm_notch = tuple(0.5 * (DENSE_IN[2 + 12] + DENSE_IN[2 + 13]))  # half way along an edge of the armhole
+    block.add_line(side_notch, (9.75, 8.0), dxfattribs={"layer": "4"})
+    block.add_line(arm_notch, tuple(np.array(arm_notch) + [-0.2, -0.1]), dxfattribs={"layer": "4"})
+    doc.modelspace().add_blockref("FRONT", (0, 0))
+    doc.modelspace().add_text("Units: ENGLISH", dxfattribs={"insert": (-30, 0)})
+    doc.saveas(tmp_path / "clo.dxf")
+    (front,) = read_dxf(tmp_path / "clo.dxf")
+    expect = np.vstack([FRONT_IN[:2], [side_notch], FRONT_IN[2:3], [arm_notch], FRONT_IN[3:]]) * 0.0254
+    np.testing.assert_allclose(front.corners, expect, rtol=0, atol=1e-12)
+    assert front.corner_names == ["c0", "c1", "notch1", "c3", "notch2", "c5", "c6", "c7"]
+    assert [s.kind for s in front.segments] == ["line", "line", "line", "polyline", "polyline", "line", "polyline",
+                                                "line"]
+    outline = PatternPiece.from_polygon("dense", DENSE_IN, units="in")
+    assert front.area() == pytest.approx(outline.area(), rel=1e-12)  # the same outline, fewer corners

@@ -33,6 +33,11 @@ Reading (`read_dxf`):
     into the whole piece (PatternPiece.unfolded) and every piece is turned so its grain line runs up (upright).
     A graded file (a "Size: M" text in each block, or blocks named <piece>_<size> with a "Sample Size: M" text)
     gives the pieces of one size, named without it: `size`, else the sample size.
+  * An AAMA block's outline has its corners where pattern CAD marks them: at its turn points (layer 2, where
+    grade-rule labels sit), at its notches (layer 4; a straight edge is split there, the corner named
+    "notch<k>" in loop order), where it turns by more than AAMA_CORNER_TURN, and where a curve meets; the
+    straight edges between are one "polyline" (a boundary exported as one closed polyline would otherwise have a
+    corner at every vertex).
   * Corner names: in an AAMA block (one with entities on the boundary layer "1"), only the texts on layer "1"
     name corners; anywhere, a text that is an AAMA grade-rule label ("# 12") is not a name, and a name that two
     corners of one piece would share is given to the first, the second keeping its default "c<i>".
@@ -59,6 +64,7 @@ from ezdxf.lldxf.validator import is_valid_layer_name
 from ezdxf.math import rational_bspline_from_ellipse
 
 from ..errors import PatternError
+from . import pattern
 from .pattern import UNITS, PatternPiece, Segment, open_uniform_knots, unit_scale
 
 __all__ = ["dxf_units", "read_dxf", "write_dxf"]
@@ -75,7 +81,7 @@ _UNITS_TEXT = re.compile(r"^\s*units?\s*[:=]\s*(\S+)\s*$", re.IGNORECASE)
 _GRADE_RULE_TEXT = re.compile(r"^\s*#\s*\d+\s*$")
 _SIZE_TEXT = re.compile(r"^\s*size\s*[:=]\s*(\S+)\s*$", re.IGNORECASE)
 _SAMPLE_SIZE_TEXT = re.compile(r"^\s*(?:sample|base)\s+size\s*[:=]\s*(\S+)\s*$", re.IGNORECASE)
-_AAMA_FOLD_LAYER, _AAMA_GRAIN_LAYER = "6", "7"
+_AAMA_TURN_LAYER, _AAMA_NOTCH_LAYER, _AAMA_FOLD_LAYER, _AAMA_GRAIN_LAYER = "2", "4", "6", "7"
 #: the span [m] a garment's largest pattern piece lies in, to tell whether a file without units is in mm
 PLAUSIBLE_PIECE_SIZE = (0.10, 5.0)
 #: how a user gives a DXF file's unit, said in every message about a missing or unreadable one
@@ -114,6 +120,8 @@ class _Source:
     grain: np.ndarray | None = None
     fold: np.ndarray | None = None
     size: str | None = None
+    turns: np.ndarray | None = None  # (k, 2) [file units] an AAMA block's turn points (layer 2): its corners
+    notches: np.ndarray | None = None  # (k, 2) [file units] the points of its notches (layer 4)
 
 
 # ----------------------------------------------------------------------------------------------------------
@@ -282,12 +290,30 @@ def _sources(doc) -> list:
             grain, fold = (_longest_line(x for x in ents if x.dxf.layer == layer)
                            for layer in (_AAMA_GRAIN_LAYER, _AAMA_FOLD_LAYER))
             size = next((m.group(1) for x in ents if _is_text(x) for m in [_SIZE_TEXT.match(_label(x))] if m), None)
+            turns = notches = None
             if any(x.dxf.layer == _AAMA_BOUNDARY_LAYER and not _is_text(x) for x in ents):
+                turns, notches = (_mark_points(x for x in ents if x.dxf.layer == layer)
+                                  for layer in (_AAMA_TURN_LAYER, _AAMA_NOTCH_LAYER))
                 ents = [x for x in ents if x.dxf.layer == _AAMA_BOUNDARY_LAYER]
-            blocks.append(_Source("block", e.dxf.name, ents, grain, fold, size))
+            blocks.append(_Source("block", e.dxf.name, ents, grain, fold, size, turns, notches))
         else:
             layers.setdefault(e.dxf.layer, _Source("layer", e.dxf.layer, [])).entities.append(e)
     return list(layers.values()) + blocks
+
+
+def _mark_points(entities) -> np.ndarray:
+    """(k, 2) [file units] the points that mark places on an outline: a TEXT's or POINT's location, the ends of a
+    LINE (a notch is a short line from the outline inward)."""
+    pts = []
+    for e in entities:
+        kind = e.dxftype()
+        if kind == "TEXT":
+            pts.append(_xy(e.ocs().to_wcs(e.dxf.insert)))
+        elif kind == "POINT":
+            pts.append(_xy(e.dxf.location))
+        elif kind == "LINE":
+            pts += [_xy(e.dxf.start), _xy(e.dxf.end)]
+    return np.array(pts, dtype=np.float64).reshape(-1, 2)
 
 
 def _longest_line(entities) -> np.ndarray | None:
@@ -348,9 +374,67 @@ def _source_loops(src: _Source, path: Path, scale: float, unit_name: str, tolera
     out = []
     for k, loop in enumerate(loops):
         loop = _snap(loop)
+        names = texts
+        if src.turns is not None:  # an AAMA block: corners where the file marks them, notches among them
+            loop, notched = _aama_corners(loop, src.turns * scale, src.notches * scale, tol)
+            names = texts + [(p[None], f"notch{j + 1}") for j, p in enumerate(notched)]
         name = src.name if k == 0 else f"{src.name}.{k}"
-        out.append((name, loop, _corner_names(loop, texts, tol), tol))
+        out.append((name, loop, _corner_names(loop, names, tol), tol))
     return out
+
+
+#: [deg] an AAMA outline's vertex turning by more than this is a corner even where no turn point marks it: a
+#: curve drawn as a polyline turns by a few degrees a vertex (2 mm edges round an 8 cm armhole: 1.5 degrees)
+AAMA_CORNER_TURN = 10.0
+
+
+def _aama_corners(segs: list, turns: np.ndarray, notches: np.ndarray, tol: float) -> tuple[list, list]:
+    """An AAMA outline's segments with its corners where pattern CAD marks them: at its turn points, at its
+    notches (a straight edge split there), where it turns by more than AAMA_CORNER_TURN and where a curve (arc,
+    spline) meets; between them its straight edges are one "polyline" (a boundary exported as one polyline
+    otherwise has a corner at every vertex: 148 a piece, edges of 2 mm). Also the notch points on it, in order."""
+    notched: list = []
+    split = []
+    for seg in segs:
+        if seg.kind not in ("line", "polyline") or not len(notches):
+            split.append(seg)
+            continue
+        pts = seg.points
+        for q in notches:
+            d = pattern._point_segment_distance(q, pts[:-1], pts[1:])
+            i = int(np.argmin(d))
+            if d[i] <= tol and np.min(np.linalg.norm(pts - q, axis=1)) > tol:  # on an edge, not at a vertex
+                pts = np.insert(pts, i + 1, q, axis=0)
+        cuts = [j for j in range(1, len(pts) - 1) if np.min(np.linalg.norm(notches - pts[j], axis=1)) <= tol]
+        notched += [pts[j] for j in cuts]
+        cuts = [0, *cuts, len(pts) - 1]
+        split += [Segment("line" if b - a == 1 else "polyline", pts[a:b + 1]) for a, b in zip(cuts, cuts[1:])]
+    marked = np.vstack([turns, notches]) if len(notches) else turns
+    n = len(split)
+    keep = []
+    for i in range(n):  # corner i is where split[i - 1] ends and split[i] starts
+        a, b = split[i - 1], split[i]
+        straight = a.kind in ("line", "polyline") and b.kind in ("line", "polyline")
+        p = b.start
+        if not straight or (len(marked) and np.min(np.linalg.norm(marked - p, axis=1)) <= tol):
+            keep.append(i)
+            continue
+        u, v = a.points[-1] - a.points[-2], b.points[1] - b.points[0]
+        if np.dot(u, v) < math.cos(math.radians(AAMA_CORNER_TURN)) * np.linalg.norm(u) * np.linalg.norm(v):
+            keep.append(i)
+    if len(keep) < 3:
+        return segs, []  # a smooth outline without marks: every vertex stays a corner, as drawn
+    out = []
+    for k, i in enumerate(keep):
+        j = keep[(k + 1) % len(keep)]
+        run = [split[m % n] for m in range(i, j if j > i else j + n)]
+        if len(run) == 1:
+            out.append(run[0])
+        else:
+            pts = np.vstack([run[0].points] + [r.points[1:] for r in run[1:]])
+            out.append(Segment("polyline", pts))
+    return out, notched
+
 
 
 def _default_tol(entities, scale: float) -> float:
