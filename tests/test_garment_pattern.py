@@ -582,3 +582,20 @@ def test_an_aama_outline_has_corners_at_its_turn_points_and_notches_not_at_every
                                                 "line"]
     outline = PatternPiece.from_polygon("dense", DENSE_IN, units="in")
     assert front.area() == pytest.approx(outline.area(), rel=1e-12)  # the same outline, fewer corners
+
+
+def test_an_aama_piece_with_a_sew_line_is_the_piece_inside_its_seam_allowance(tmp_path):
+    path = aama_file(tmp_path / "front.dxf", units_text="Units: ENGLISH")
+    doc = ezdxf.readfile(path)
+    block = doc.blocks.get("FRONT")
+    centre = FRONT_IN.mean(axis=0)
+    for e in list(block):
+        if e.dxftype() == "POLYLINE":
+            block.delete_entity(e)
+    block.add_polyline2d([tuple(centre + 1.1 * (p - centre)) for p in FRONT_IN], close=True,
+                         dxfattribs={"layer": "1"})  # the cut line, 10 % out
+    block.add_polyline2d([tuple(p) for p in FRONT_IN], close=True, dxfattribs={"layer": "14"})
+    doc.saveas(path)
+    (front,) = read_dxf(path)
+    np.testing.assert_allclose(front.corners, FRONT_IN * 0.0254, rtol=0, atol=1e-12)
+    assert front.corner_names == ["c0", "c1", "c2", "c3", "neck", "c5"]  # layer-1 texts name sew-line corners

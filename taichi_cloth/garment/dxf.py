@@ -28,6 +28,9 @@ Reading (`read_dxf`):
     pattern-CAD export unit) if its largest piece is then 10 cm to 5 m across, and refused otherwise with one
     PatternError naming the size and the unit options (an inch file read as mm is 25.4x too small: a T-shirt
     front 2.8 cm across). Pieces are returned in metres.
+  * An AAMA block with a sew line (layer 14) is the piece inside it: the garment is sewn there, and the cut
+    line (layer 1) adds the seam allowance; its notches and turn points mark the sew line's corners only where
+    they lie on it.
   * AAMA / ASTM D6673 markings of a block: its grain line (layer 7) and fold or mirror line (layer 6), the
     longest LINE on each, become the piece's `grain` and `fold`; unless `as_drawn`, a half on a fold is unfolded
     into the whole piece (PatternPiece.unfolded) and every piece is turned so its grain line runs up (upright).
@@ -81,7 +84,8 @@ _UNITS_TEXT = re.compile(r"^\s*units?\s*[:=]\s*(\S+)\s*$", re.IGNORECASE)
 _GRADE_RULE_TEXT = re.compile(r"^\s*#\s*\d+\s*$")
 _SIZE_TEXT = re.compile(r"^\s*size\s*[:=]\s*(\S+)\s*$", re.IGNORECASE)
 _SAMPLE_SIZE_TEXT = re.compile(r"^\s*(?:sample|base)\s+size\s*[:=]\s*(\S+)\s*$", re.IGNORECASE)
-_AAMA_TURN_LAYER, _AAMA_NOTCH_LAYER, _AAMA_FOLD_LAYER, _AAMA_GRAIN_LAYER = "2", "4", "6", "7"
+_AAMA_TURN_LAYER, _AAMA_FOLD_LAYER, _AAMA_GRAIN_LAYER, _AAMA_SEW_LAYER = "2", "6", "7", "14"
+_AAMA_NOTCH_LAYERS = ("4", "80", "81", "82", "83")  # V, T, castle, check and U notches
 #: the span [m] a garment's largest pattern piece lies in, to tell whether a file without units is in mm
 PLAUSIBLE_PIECE_SIZE = (0.10, 5.0)
 #: how a user gives a DXF file's unit, said in every message about a missing or unreadable one
@@ -292,9 +296,13 @@ def _sources(doc) -> list:
             size = next((m.group(1) for x in ents if _is_text(x) for m in [_SIZE_TEXT.match(_label(x))] if m), None)
             turns = notches = None
             if any(x.dxf.layer == _AAMA_BOUNDARY_LAYER and not _is_text(x) for x in ents):
-                turns, notches = (_mark_points(x for x in ents if x.dxf.layer == layer)
-                                  for layer in (_AAMA_TURN_LAYER, _AAMA_NOTCH_LAYER))
-                ents = [x for x in ents if x.dxf.layer == _AAMA_BOUNDARY_LAYER]
+                turns, notches = (_mark_points(x for x in ents if x.dxf.layer in layers)
+                                  for layers in ((_AAMA_TURN_LAYER,), _AAMA_NOTCH_LAYERS))
+                # the sew line where the file draws one: the garment is sewn there, not at the cut line
+                outline = _AAMA_SEW_LAYER if any(x.dxf.layer == _AAMA_SEW_LAYER and not _is_text(x)
+                                                 for x in ents) else _AAMA_BOUNDARY_LAYER
+                ents = [x for x in ents if x.dxf.layer == outline and not _is_text(x)
+                        or x.dxf.layer == _AAMA_BOUNDARY_LAYER and _is_text(x)]
             blocks.append(_Source("block", e.dxf.name, ents, grain, fold, size, turns, notches))
         else:
             layers.setdefault(e.dxf.layer, _Source("layer", e.dxf.layer, [])).entities.append(e)
