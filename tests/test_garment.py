@@ -7,6 +7,7 @@ import pytest
 
 import taichi_cloth as tc
 from taichi_cloth.errors import PatternError
+from taichi_cloth.garment.dxf import write_aama_dxf
 from taichi_cloth.garment.garment import FreePlacement, GarmentSpec, build_garment
 from taichi_cloth.garment.garmentfile import load_garment
 from taichi_cloth.garment.metrics import garment_quality
@@ -274,6 +275,29 @@ def test_dxf_round_trip_of_a_generated_garment(tmp_path, body):
     # the shipped DXF files are the ones make_dxf.py writes
     for name in NAMES:
         assert load_garment(GARMENTS / f"{name}_dxf.toml").spacing == load_garment(GARMENTS / f"{name}.toml").spacing
+
+
+def test_the_tshirt_exported_as_graded_aama_reads_back_at_either_size_and_builds_with_the_same_seams(tmp_path, body):
+    """The shipped T-shirt written as pattern CAD exports it (AAMA blocks, inches, no $INSUNITS, sizes S and M)
+    and read through its DXF garment file: the same pieces (curves sampled within 0.2 mm), the same seams."""
+    spec = load_garment(GARMENTS / "tshirt.toml")
+    small = [p.transformed(scale=0.95) for p in spec.pieces]
+    write_aama_dxf({"S": small, "M": spec.pieces}, tmp_path / "tshirt_aama.dxf", units="in", sample_size="M")
+    text = (GARMENTS / "tshirt_dxf.toml").read_text(encoding="utf-8")
+    assert 'dxf = "tshirt.dxf"' in text
+    (tmp_path / "m.toml").write_text(text.replace('dxf = "tshirt.dxf"', 'dxf = "tshirt_aama.dxf"'))
+    (tmp_path / "s.toml").write_text(text.replace('dxf = "tshirt.dxf"', 'dxf = "tshirt_aama.dxf"\ndxf_size = "S"'))
+    for path, pieces in ((tmp_path / "m.toml", spec.pieces), (tmp_path / "s.toml", small)):
+        read = load_garment(path)
+        assert [p.name for p in read.pieces] == [p.name for p in pieces]
+        for p, q in zip(pieces, read.pieces):
+            assert q.corner_names == p.corner_names
+            np.testing.assert_allclose(q.corners, p.corners, rtol=0, atol=1e-12)
+            assert q.area() == pytest.approx(p.area(), rel=2e-4) and q.perimeter() == pytest.approx(p.perimeter(),
+                                                                                                  rel=2e-4)
+    direct, via_aama = build_garment(spec, body), build_garment(load_garment(tmp_path / "m.toml"), body)
+    assert via_aama.piece_names == direct.piece_names
+    np.testing.assert_array_equal(np.bincount(via_aama.seam_of_pair), np.bincount(direct.seam_of_pair))
 
 
 @pytest.mark.slow

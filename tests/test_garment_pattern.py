@@ -423,7 +423,8 @@ def test_an_inch_file_without_any_unit_is_refused_in_one_line_and_loads_when_tol
             read(path)
         msg = str(info.value)
         assert "\n" not in msg and "front.dxf" in msg and "'FRONT'" in msg and "no unit" in msg, msg
-        assert "2.65 cm across" in msg and "inches would make it 67 cm" in msg and "one of m, cm, mm, in (read_dxf's units=, a garment file's dxf_units)" in msg, msg
+        assert "2.65 cm across" in msg and "inches would make it 67 cm" in msg, msg
+        assert "one of m, cm, mm, in (read_dxf's units=, a garment file's dxf_units)" in msg, msg
     (front,) = read_dxf(path, units="in")
     np.testing.assert_allclose(front.corners, FRONT_IN * 0.0254, rtol=0, atol=1e-12)
     with pytest.raises(PatternError, match="units must be one of m, cm, mm, in, got 'inch'"):

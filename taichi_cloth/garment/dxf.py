@@ -38,7 +38,8 @@ Reading (`read_dxf`):
     gives the pieces of one size, named without it: `size`, else the sample size.
   * An AAMA block's outline has its corners where pattern CAD marks them: at its turn points (layer 2, where
     grade-rule labels sit), at its notches (layer 4; a straight edge is split there, the corner named
-    "notch<k>" in loop order), where it turns by more than AAMA_CORNER_TURN, and where a curve meets; the
+    "notch<k>" in loop order), where a curve meets, and, where no turn point is marked, where it turns by
+    more than AAMA_CORNER_TURN; the
     straight edges between are one "polyline" (a boundary exported as one closed polyline would otherwise have a
     corner at every vertex).
   * Corner names: in an AAMA block (one with entities on the boundary layer "1"), only the texts on layer "1"
@@ -55,6 +56,7 @@ the corner. A round trip gives back equal pieces (a zero-bulge "arc" reads back 
 from __future__ import annotations
 
 import dataclasses
+import logging
 import math
 import re
 from dataclasses import dataclass
@@ -70,7 +72,7 @@ from ..errors import PatternError
 from . import pattern
 from .pattern import UNITS, PatternPiece, Segment, open_uniform_knots, unit_scale
 
-__all__ = ["dxf_units", "read_dxf", "write_dxf"]
+__all__ = ["dxf_units", "read_dxf", "write_aama_dxf", "write_dxf"]
 
 _INSUNITS_TO_UNITS = {0: "mm", 1: "in", 4: "mm", 5: "cm", 6: "m"}
 _UNITS_TO_INSUNITS = {"in": 1, "mm": 4, "cm": 5, "m": 6}
@@ -398,9 +400,10 @@ AAMA_CORNER_TURN = 10.0
 
 def _aama_corners(segs: list, turns: np.ndarray, notches: np.ndarray, tol: float) -> tuple[list, list]:
     """An AAMA outline's segments with its corners where pattern CAD marks them: at its turn points, at its
-    notches (a straight edge split there), where it turns by more than AAMA_CORNER_TURN and where a curve (arc,
-    spline) meets; between them its straight edges are one "polyline" (a boundary exported as one polyline
-    otherwise has a corner at every vertex: 148 a piece, edges of 2 mm). Also the notch points on it, in order."""
+    notches (a straight edge split there), where a curve (arc, spline) meets, and, in a file that marks no turn
+    points, where it turns by more than AAMA_CORNER_TURN; between them its straight edges are one "polyline" (a
+    boundary exported as one polyline otherwise has a corner at every vertex: 148 a piece, edges of 2 mm). Also
+    the notch points on it, in order."""
     notched: list = []
     split = []
     for seg in segs:
@@ -427,6 +430,8 @@ def _aama_corners(segs: list, turns: np.ndarray, notches: np.ndarray, tol: float
         if not straight or (len(marked) and np.min(np.linalg.norm(marked - p, axis=1)) <= tol):
             keep.append(i)
             continue
+        if len(turns):
+            continue  # the file marks its turn points: the others are points of curves, however sharp
         u, v = a.points[-1] - a.points[-2], b.points[1] - b.points[0]
         if np.dot(u, v) < math.cos(math.radians(AAMA_CORNER_TURN)) * np.linalg.norm(u) * np.linalg.norm(v):
             keep.append(i)
@@ -727,6 +732,74 @@ def write_dxf(pieces, path, units: str = "mm") -> Path:
         height = 0.01 * piece.size() / scale or 1.0
         for label, corner in zip(piece.corner_names, piece.corners):
             msp.add_text(label, height=height, dxfattribs={**attrs, "insert": (*(corner / scale), 0.0)})
+    try:
+        doc.saveas(path)
+    except OSError as exc:
+        raise PatternError(f"cannot write DXF file {path}: {exc}") from None
+    return path
+
+
+def write_aama_dxf(pieces, path, units: str = "in", sample_size: str | None = None,
+                   tolerance: float = 2e-4) -> Path:
+    """Write pattern pieces to `path` as AAMA / ASTM D6673 pattern CAD exports them; returns the path.
+
+    pieces: a list of PatternPiece [m], or, for a graded file, {size: [PatternPiece, ...]} with `sample_size` one
+    of its keys. units: "in" (written "Units: ENGLISH") or "mm" ("Units: METRIC"); no $INSUNITS (DXF R12). Each
+    piece is a block (<piece>_<size> when graded) inserted at the origin: its outline one closed POLYLINE on layer
+    1 (arcs as bulges, B-splines sampled within `tolerance` [m]), a grade-rule label "# k" at each corner on
+    layer 2 (turn points), the corner's name as a TEXT on layer 1, a grain line along +v on layer 7, and the
+    annotations "Piece Name:" and "Size:" on layer 1; the sample size as a model-space text."""
+    if units not in ("in", "mm"):
+        raise PatternError(f"write_aama_dxf: AAMA files are in inches or millimetres (units 'in' or 'mm'), "
+                           f"got {units!r}")
+    graded = dict(pieces) if isinstance(pieces, dict) else {None: list(pieces)}
+    if isinstance(pieces, dict) and sample_size not in graded:
+        raise PatternError(f"write_aama_dxf: sample_size {sample_size!r} is not one of the sizes "
+                           f"{', '.join(map(str, graded))}")
+    path, scale = Path(path), unit_scale(units)
+    quiet = logging.getLogger("ezdxf")
+    level = quiet.level
+    quiet.setLevel(logging.ERROR)  # ezdxf.new sets $INSUNITS, which R12 lacks, and warns: the "Units:" text says it
+    try:
+        doc = ezdxf.new("R12", units=1 if units == "in" else 4)
+    finally:
+        quiet.setLevel(level)
+    msp = doc.modelspace()
+    msp.add_text(f"Units: {'ENGLISH' if units == 'in' else 'METRIC'}", dxfattribs={"insert": (0.0, -1.0)})
+    if sample_size is not None:
+        msp.add_text(f"Sample Size: {sample_size}", dxfattribs={"insert": (0.0, -2.0)})
+    for size, group in graded.items():
+        for piece in group:
+            name = piece.name if size is None else f"{piece.name}_{size}"
+            if not is_valid_layer_name(name) or name in doc.blocks:
+                raise PatternError(f"write_aama_dxf: piece name {name!r} is not a valid block name or is used twice")
+            block = doc.blocks.new(name)
+            vertices = []
+            for seg in piece.segments:
+                pts = seg.points if seg.kind in ("line", "polyline") else (seg.points[:1] if seg.kind == "arc"
+                                                                          else seg.sample(tolerance))
+                vertices += [(*(p / scale), seg.bulge if seg.kind == "arc" and k == 0 else 0.0)
+                             for k, p in enumerate(pts[:-1] if seg.kind != "arc" else pts)]
+            block.add_polyline2d([(x, y) for x, y, _ in vertices], format="xy", close=True,
+                                 dxfattribs={"layer": _AAMA_BOUNDARY_LAYER})
+            poly = next(iter(block.query("POLYLINE")))
+            for v, (_, _, bulge) in zip(poly.vertices, vertices):
+                v.dxf.bulge = bulge
+            height = 0.01 * piece.size() / scale or 1.0
+            for k, (label, corner) in enumerate(zip(piece.corner_names, piece.corners)):
+                at = {"insert": tuple(corner / scale), "height": height}
+                block.add_text(f"# {k}", dxfattribs={"layer": _AAMA_TURN_LAYER, **at})
+                block.add_text(label, dxfattribs={"layer": _AAMA_BOUNDARY_LAYER, **at})
+            lo, hi = (np.vstack([s.points for s in piece.segments]).min(axis=0) / scale,
+                      np.vstack([s.points for s in piece.segments]).max(axis=0) / scale)
+            mid, quarter = 0.5 * (lo + hi), 0.25 * (hi[1] - lo[1])
+            block.add_line((mid[0], mid[1] - quarter), (mid[0], mid[1] + quarter),
+                           dxfattribs={"layer": _AAMA_GRAIN_LAYER})
+            labels = [f"Piece Name: {piece.name}"] + ([] if size is None else [f"Size: {size}"])
+            for k, label in enumerate(labels):
+                block.add_text(label, dxfattribs={"layer": _AAMA_BOUNDARY_LAYER, "height": height,
+                                                  "insert": (mid[0], mid[1] - (k + 1) * 2 * height)})
+            msp.add_blockref(name, (0.0, 0.0))
     try:
         doc.saveas(path)
     except OSError as exc:
