@@ -600,3 +600,35 @@ def test_an_aama_piece_with_a_sew_line_is_the_piece_inside_its_seam_allowance(tm
     (front,) = read_dxf(path)
     np.testing.assert_allclose(front.corners, FRONT_IN * 0.0254, rtol=0, atol=1e-12)
     assert front.corner_names == ["c0", "c1", "c2", "c3", "neck", "c5"]  # layer-1 texts name sew-line corners
+
+
+def test_a_seam_allowance_taken_off_moves_every_edge_in_by_it():
+    square = PatternPiece.from_polygon("sq", [[0, 0], [2, 0], [2, 1], [0, 1]])
+    for piece in (square, square.transformed(mirror=True)):  # counter-clockwise and clockwise
+        inner = piece.inset(0.1)
+        toward_centre = np.sign(piece.corners.mean(axis=0) - piece.corners)  # each corner moves 0.1 in x and y
+        np.testing.assert_allclose(inner.corners, piece.corners + 0.1 * toward_centre, rtol=0, atol=1e-15)
+        assert inner.area() == pytest.approx(1.8 * 0.8, rel=1e-12) and inner.corner_names == piece.corner_names
+    assert square.inset(0.0) is square
+    circle = circle_piece(0.1)
+    assert circle.inset(0.01, tolerance=1e-6).area() == pytest.approx(math.pi * 0.09 ** 2, rel=1e-4)
+    with pytest.raises(PatternError, match="'sq': a seam allowance of 60 cm leaves no outline"):
+        square.inset(0.6)
+    with pytest.raises(PatternError, match="must be a length >= 0"):
+        square.inset(-0.01)
+
+
+def test_a_garment_file_takes_its_seam_allowance_off_a_dxf_s_cut_lines(tmp_path):
+    aama_file(tmp_path / "front.dxf", units_text="Units: ENGLISH")
+    text = ('name = "front"\nunits = "in"\nspacing = 1.0\ndxf = "front.dxf"\n{top}\n'
+            '[[pieces]]\nname = "FRONT"\nplacement = {{ origin = [0, 40, 0] }}\n{piece}\n')
+    sew = PatternPiece.from_polygon("FRONT", FRONT_IN, units="in")
+    for top, piece, allowance in (("seam_allowance = 0.5", "", 0.5), ("seam_allowance = 0.5", "seam_allowance = 0.25",
+                                                                      0.25), ("", "", 0.0)):
+        (tmp_path / "g.toml").write_text(text.format(top=top, piece=piece))
+        (front,) = load_garment(tmp_path / "g.toml").pieces
+        np.testing.assert_allclose(front.corners, sew.inset(allowance * 0.0254).corners, rtol=0, atol=1e-12)
+    (tmp_path / "g.toml").write_text(text.format(top="", piece="seam_allowance = 0.5\noutline = [{ at = [0, 0] }, "
+                                                 "{ at = [10, 0] }, { at = [0, 10] }]"))
+    with pytest.raises(PatternError, match="an outline or a copy is a sew line already"):
+        load_garment(tmp_path / "g.toml")

@@ -15,6 +15,8 @@ material and placement of a garment; every length is in the file's `units`.
     # dxf_units = "in"            # the DXF's unit when the file gives none or a wrong one (default: its
                                   # $INSUNITS, else its "Units:" text, else mm if its pieces are of a garment's size)
     # dxf_size = "M"              # the size of a graded DXF (default: its "Sample Size:")
+    # seam_allowance = 1.0        # taken off the DXF's pieces (a file of cut lines without sew lines), in `units`;
+                                  # a [[pieces]] entry may give its own
 
     [[pieces]]
     name = "front"
@@ -69,10 +71,11 @@ GARMENT_SCHEMA = Table({
     "dxf": Field("str", None),
     "dxf_units": Field("str", None, choices=("m", "cm", "mm", "in")),
     "dxf_size": Field("str", None),
+    "seam_allowance": Field("number", 0.0, nonneg),
     "pieces": Array(Table({
         "name": Field("str"), "outline": Field("tables", None), "copy": Field("str", None),
         "mirror": Field("bool", False), "corners": Field("names", None), "rotate": Field("number", None),
-        "unfold": Field("bool", True),
+        "unfold": Field("bool", True), "seam_allowance": Field("number", None, nonneg),
         "placement": Table({"anchor": Field("str", None), "at": Field("vec2", None),
                             "offset": Field("number", None, nonneg), "wrap": Field("bool", True),
                             "height": Field("number", 0.0), "angle": Field("number", 0.0),
@@ -139,6 +142,9 @@ def _spec(cfg: dict, path: Path, material: Material | None, dxf_reader=None) -> 
         for key in ("dxf_units", "dxf_size"):
             if cfg[key] is not None:
                 raise PatternError(f"{key} is about the file `dxf` names: give dxf too, or leave {key} out")
+        if cfg["seam_allowance"] or any(p["seam_allowance"] for p in cfg["pieces"]):
+            raise PatternError("seam_allowance is taken off a DXF's cut lines: give dxf too (an outline here is "
+                               "the sew line already)")
     pieces, placements = {}, {}
     for k, p in enumerate(cfg["pieces"]):
         where = f"[[pieces]] #{k + 1} ({p['name']!r})"
@@ -158,9 +164,14 @@ def _spec(cfg: dict, path: Path, material: Material | None, dxf_reader=None) -> 
                 raise PatternError(f"{where}: the DXF file has no piece {p['name']!r} (it has "
                                    f"{', '.join(dxf_pieces)})")
             piece = dxf_pieces[p["name"]]
-            piece = (piece.unfolded() if p["unfold"] and piece.fold is not None else piece).upright(p["rotate"])
+            piece = piece.unfolded() if p["unfold"] and piece.fold is not None else piece
+            allowance = cfg["seam_allowance"] if p["seam_allowance"] is None else p["seam_allowance"]
+            piece = piece.inset(s * allowance).upright(p["rotate"])
         else:
             raise PatternError(f"{where}: needs an outline (or copy, or a dxf file at the top level)")
+        if p["seam_allowance"] is not None and (p["outline"] is not None or p["copy"] is not None):
+            raise PatternError(f"{where}: seam_allowance is taken off a DXF piece's cut line; an outline or a copy "
+                               f"is a sew line already")
         if p["mirror"] and p["copy"] is None:
             piece = piece.transformed(mirror=True)
         if p["corners"] is not None:

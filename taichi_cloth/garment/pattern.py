@@ -737,6 +737,39 @@ class PatternPiece:
         (x0, y0), (x1, y1) = self.grain
         return self.rotated(90.0 - math.degrees(math.atan2(y1 - y0, x1 - x0)))
 
+    def inset(self, distance: float, tolerance: float = 1e-4) -> "PatternPiece":
+        """The outline moved `distance` [m] inwards, square to itself: a cut line with its seam allowance taken
+        off gives the sew line. Straight edges stay lines; curves become polylines through their points sampled
+        within `tolerance` [m], each moved along the mean of its two edges' normals (a mitre, exact for straight
+        edges); each corner moves to where its two moved edges meet. PatternError naming the piece when the
+        allowance is not a length >= 0 or leaves no outline (the piece is narrower than twice it)."""
+        if not (math.isfinite(distance) and distance >= 0):
+            raise PatternError(f"pattern piece '{self.name}': a seam allowance must be a length >= 0, got {distance!r}")
+        if distance == 0:
+            return self
+        lines = self.polylines(tolerance)
+        starts = np.cumsum([0] + [len(p) - 1 for p in lines])
+        pts = np.vstack([p[:-1] for p in lines])
+        edge = np.roll(pts, -1, axis=0) - pts
+        normal = np.c_[-edge[:, 1], edge[:, 0]] / np.linalg.norm(edge, axis=1, keepdims=True)
+        normal *= self.orientation  # inwards: left of a counter-clockwise loop
+        before = np.roll(normal, 1, axis=0)  # the normal of the edge that ends at each point
+        moved = pts + distance * (normal + before) / (1.0 + np.einsum("ij,ij->i", normal, before))[:, None]
+        segs = []
+        for i, seg in enumerate(self.segments):
+            run = moved[np.arange(starts[i], starts[i + 1] + 1) % len(moved)]
+            segs.append(Segment("line", run) if seg.kind == "line" else Segment("polyline", run))
+        piece = PatternPiece(self.name, segs, list(self.corner_names), self.grain, self.fold)
+        if piece.orientation != self.orientation or piece.area() >= self.area():
+            raise PatternError(f"pattern piece '{self.name}': a seam allowance of {100 * distance:g} cm leaves no "
+                               f"outline")
+        try:
+            piece.validate()
+        except PatternError as exc:
+            raise PatternError(f"pattern piece '{self.name}': with a seam allowance of {100 * distance:g} cm taken "
+                               f"off: {str(exc).split(': ', 1)[-1]}") from None
+        return piece
+
     def unfolded(self, tolerance: float | None = None) -> "PatternPiece":
         """The whole piece of a half drawn on a fold: the outline without its edge on the fold line, then its
         mirror image across that line (corner `name` mirrored as `name_mirror`; the two corners on the fold keep

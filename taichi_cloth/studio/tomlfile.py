@@ -8,7 +8,8 @@ import math
 import re
 
 #: top-level keys in the order the shipped garment files give them; any other key follows them
-TOP_KEYS = ("name", "dxf", "dxf_units", "dxf_size", "units", "material", "spacing", "resolution", "levels")
+TOP_KEYS = ("name", "dxf", "dxf_units", "dxf_size", "seam_allowance", "units", "material", "spacing", "resolution",
+            "levels")
 #: arrays of tables, in this order
 TABLE_ARRAYS = ("pieces", "seams", "fixed")
 _BARE_KEY = re.compile(r"^[A-Za-z0-9_-]+$")
