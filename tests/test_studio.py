@@ -485,3 +485,39 @@ def test_a_dxf_without_units_opens_in_the_unit_the_page_gives_and_saves_it(folde
     assert c.post("/api/upload", files={"file": ("up.dxf", data)}).status_code == 400
     r = ok(c.post("/api/upload", files={"file": ("up.dxf", data)}, data={"units": "in"}))
     assert r["kept"] == "up.dxf" and r["state"]["units"] == "in"
+
+
+def test_a_dxf_piece_s_pattern_options_and_the_dxf_s_options_are_set_saved_and_undone(folder):
+    doc = ezdxf.new("R12")  # a half front on its side, on a fold, graded S and M, inches
+    for size, grade in (("S", 0.95), ("M", 1.0)):
+        block = doc.blocks.new(f"FRONT_{size}")
+        half = np.array([[0, 0], [0, -10], [17, -10], [23, -7.5], [24.5, -3], [22, 0]]) * grade
+        block.add_polyline2d([tuple(p) for p in half], close=True, dxfattribs={"layer": "1"})
+        block.add_line((0, 0), (22 * grade, 0), dxfattribs={"layer": "6"})  # the fold: centre front
+        block.add_line((5, -5), (15, -5), dxfattribs={"layer": "7"})  # the grain: up is +x
+        block.add_text(f"Size: {size}", dxfattribs={"layer": "1", "insert": (8, -4)})
+        doc.modelspace().add_blockref(f"FRONT_{size}", (0, 0))
+    doc.modelspace().add_text("Units: ENGLISH", dxfattribs={"insert": (-30, 0)})
+    doc.modelspace().add_text("Sample Size: M", dxfattribs={"insert": (-30, -5)})
+    doc.saveas(folder / "graded.dxf")
+    c = client(folder, "graded.dxf")
+    state = ok(c.get("/api/state"))
+    assert state["units"] == "in" and state["pattern_options"] == {"FRONT": {}} and state["dxf_options"] == {}
+    hem = state["pieces"][0]["sides"][0]["length"]
+    assert hem == pytest.approx(10.0, abs=1e-3)  # upright and unfolded: the hem runs from centre front to the side
+    state = ok(c.put("/api/dxf", json={"dxf_size": "S", "seam_allowance": 0.5}))["state"]
+    assert state["dxf_options"] == {"dxf_size": "S", "seam_allowance": 0.5}
+    assert state["pieces"][0]["sides"][0]["length"] == pytest.approx(9.5 - 0.5, abs=1e-3)  # S, less the allowance
+    state = ok(c.put("/api/pieces/FRONT/pattern", json={"unfold": False, "rotate": 0}))["state"]
+    assert state["pattern_options"] == {"FRONT": {"unfold": False, "rotate": 0}}
+    r = c.put("/api/pieces/FRONT/pattern", json={"turn": 90})
+    assert r.status_code == 400 and "unknown keys turn" in r.json()["error"]
+    assert c.put("/api/pieces/BACK/pattern", json={}).status_code == 404
+    r = c.put("/api/dxf", json={"dxf_size": "XL"})
+    assert r.status_code == 400 and "no size 'XL'" in r.json()["error"] and "\n" not in r.json()["error"]
+    ok(c.post("/api/save", json={"path": "graded.toml"}))
+    saved = tomllib.loads((folder / "graded.toml").read_text(encoding="utf-8"))
+    assert saved["dxf_size"] == "S" and saved["seam_allowance"] == 0.5
+    assert saved["pieces"][0]["unfold"] is False and saved["pieces"][0]["rotate"] == 0
+    ok(c.post("/api/undo"))
+    assert ok(c.get("/api/state"))["pattern_options"] == {"FRONT": {}}

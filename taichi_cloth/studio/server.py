@@ -217,6 +217,14 @@ def create_app(root, start: str | None = None, drape_command=None, anchors=None)
         data = await _json(request)
         return await call(studio.session.set_placement, request.path_params["piece"], data)
 
+    async def piece_pattern(request):
+        data = await _json(request)
+        return await call(studio.session.set_piece_pattern, request.path_params["piece"], data)
+
+    async def dxf_options(request):
+        data = await _json(request)
+        return await call(studio.session.set_dxf_options, data)
+
     async def material(request):
         data = await _json(request)
         return await call(studio.session.set_material, data.get("preset"), data.get("values"))
@@ -285,6 +293,8 @@ def create_app(root, start: str | None = None, drape_command=None, anchors=None)
         Route("/api/seams/{index:int}", guarded(delete_seam), methods=["DELETE"]),
         Route("/api/seams/{index:int}/flip", guarded(flip_seam), methods=["POST"]),
         Route("/api/placements/{piece}", guarded(place), methods=["PUT"]),
+        Route("/api/pieces/{piece}/pattern", guarded(piece_pattern), methods=["PUT"]),
+        Route("/api/dxf", guarded(dxf_options), methods=["PUT"]),
         Route("/api/material", guarded(material), methods=["PUT"]),
         Route("/api/spacing", guarded(spacing), methods=["PUT"]),
         Route("/api/undo", guarded(undo), methods=["POST"]),

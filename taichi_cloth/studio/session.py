@@ -46,6 +46,10 @@ DEFAULT_SPACING = 0.02
 UNDO_DEPTH = 200
 MATERIAL_KEYS = ("density", "stretch", "shear", "bend", "damping", "viscosity")
 PLACEMENT_KEYS = ("anchor", "at", "offset", "height", "angle", "wrap")
+#: a DXF piece's pattern options in a garment file (taichi_cloth.garment.garmentfile) and their defaults
+PIECE_PATTERN_DEFAULTS = {"rotate": None, "unfold": True, "seam_allowance": None}
+#: the DXF file's options at a garment file's top level and their defaults
+DXF_DEFAULTS = {"dxf_units": None, "dxf_size": None, "seam_allowance": 0.0}
 
 
 def guess_anchor(piece: str) -> str:
@@ -340,6 +344,42 @@ class Session:
             entry["placement"] = new
             self._commit(doc)
 
+    def set_piece_pattern(self, piece, options) -> None:
+        """A DXF piece's pattern options: {"rotate": [deg] counter-clockwise, or None to turn it by its grain
+        line; "unfold": whether a half on a fold is unfolded; "seam_allowance": taken off its cut line, in the
+        file's units, or None for the file's}; keys left out (or at their defaults) are not written."""
+        with self.lock:
+            doc = self._edit()
+            entry = next((p for p in doc.get("pieces", []) if p.get("name") == piece), None)
+            if entry is None:
+                raise Refused(f"no piece {piece!r}", 404)
+            self._set_options(entry, options, PIECE_PATTERN_DEFAULTS, f"pattern options of {piece!r}")
+            self._commit(doc)
+
+    def set_dxf_options(self, options) -> None:
+        """The DXF file's options: {"dxf_units": its unit where it gives none, "dxf_size": the size of a graded
+        file, "seam_allowance": taken off its cut lines, in the file's units}; keys left out (or at their defaults:
+        the file's unit, its sample size, none) are not written."""
+        with self.lock:
+            doc = self._edit()
+            if not doc.get("dxf"):
+                raise PatternError("the set-up takes no pieces from a DXF file: it has no DXF options")
+            self._set_options(doc, options, DXF_DEFAULTS, "DXF options")
+            self._commit(doc)
+
+    @staticmethod
+    def _set_options(table: dict, options, defaults: dict, what: str) -> None:
+        """Write `options` into `table`, leaving out those at their defaults (the garment file checks the rest)."""
+        if not isinstance(options, dict):
+            raise PatternError(f"{what} must be a table, got {options!r}")
+        unknown = sorted(set(options) - set(defaults))
+        if unknown:
+            raise PatternError(f"{what}: unknown keys {', '.join(unknown)} (known: {', '.join(defaults)})")
+        for key, default in defaults.items():
+            table.pop(key, None)
+            if options.get(key) is not None and options[key] != default:
+                table[key] = options[key]
+
     def set_material(self, preset, values=None) -> None:
         """The material: a preset, and any of its numbers replaced (values: key -> number; a value equal to the
         preset's, or None, keeps the preset's)."""
@@ -521,6 +561,9 @@ class Session:
                 "target": self.target, "saved": self.version == self.saved_version, "dxf": self.doc.get("dxf"),
                 "pieces": drawing["pieces"], "seams": drawing["seams"], "warnings": warnings,
                 "placements": {p["name"]: p.get("placement", {}) for p in self.doc.get("pieces", [])},
+                "pattern_options": {p["name"]: {k: p[k] for k in PIECE_PATTERN_DEFAULTS if k in p}
+                                    for p in self.doc.get("pieces", [])},
+                "dxf_options": {k: self.doc[k] for k in DXF_DEFAULTS if k in self.doc},
                 "material": self.material_state(),
                 "spacing": round(self.spec.spacing / scale, 9), "resolution": self.doc.get("resolution"),
                 "levels": self.spec.levels, "particles": self.particles(self.spec),

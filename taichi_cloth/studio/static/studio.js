@@ -315,7 +315,9 @@ function changed(form, from, force) {
 function fillPlacement(force) {
   const name = $("pl-piece").value;
   const pl = (state.placements || {})[name] || {};
-  if (!changed("placement", [name, pl], force)) return;
+  const po = (state.pattern_options || {})[name] || {};
+  const dx = state.dxf_options || {};
+  if (!changed("placement", [name, pl, po, dx, state.dxf], force)) return;
   $("pl-anchor").value = pl.anchor || "";
   $("pl-at-u").value = pl.at ? pl.at[0] : "";
   $("pl-at-v").value = pl.at ? pl.at[1] : "";
@@ -323,6 +325,27 @@ function fillPlacement(force) {
   $("pl-height").value = pl.height !== undefined ? pl.height : "";
   $("pl-angle").value = pl.angle !== undefined ? pl.angle : "";
   $("pl-wrap").checked = pl.wrap !== false;
+  $("pp-rotate").value = po.rotate !== undefined ? po.rotate : "";
+  $("pp-allowance").value = po.seam_allowance !== undefined ? po.seam_allowance : "";
+  $("pp-unfold").checked = po.unfold !== false;
+  $("dxf-units").value = dx.dxf_units || "";
+  $("dxf-size").value = dx.dxf_size || "";
+  $("dxf-allowance").value = dx.seam_allowance !== undefined ? dx.seam_allowance : "";
+  for (const id of ["pattern-options", "pp-apply", "dxf-options", "dxf-apply"]) $(id).hidden = !state.dxf;
+}
+
+async function applyPiecePattern() {
+  const name = $("pl-piece").value;
+  const body = {rotate: num("pp-rotate"), seam_allowance: num("pp-allowance"), unfold: $("pp-unfold").checked};
+  const r = await api("PUT", `/api/pieces/${encodeURIComponent(name)}/pattern`, body);
+  if (r && r.state) say(`${name}: pattern options set`, "info");
+}
+
+async function applyDxfOptions() {
+  const body = {dxf_units: $("dxf-units").value || null, dxf_size: $("dxf-size").value.trim() || null,
+                seam_allowance: num("dxf-allowance")};
+  const r = await api("PUT", "/api/dxf", body);
+  if (r && r.state) say("DXF options set", "info");
 }
 
 function num(id) {
@@ -598,6 +621,8 @@ function wire() {
   $("garment-name").addEventListener("change", (ev) => api("POST", "/api/name", {name: ev.target.value}));
   $("pl-piece").addEventListener("change", () => selectPiece($("pl-piece").value));
   $("pl-apply").addEventListener("click", applyPlacement);
+  $("pp-apply").addEventListener("click", applyPiecePattern);
+  $("dxf-apply").addEventListener("click", applyDxfOptions);
   $("mat-apply").addEventListener("click", async () => {
     const values = {};
     for (const k of Object.keys(MATERIAL_UNITS)) values[k] = num(`mat-${k}`);
