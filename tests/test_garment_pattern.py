@@ -513,6 +513,13 @@ def test_a_graded_file_gives_its_sample_size_upright_and_unfolded_and_any_size_b
     np.testing.assert_allclose(drawn.corners, FRONT_IN @ SIDEWAYS.T * 0.0254, rtol=0, atol=1e-12)
     np.testing.assert_allclose(drawn.grain, [[5 * 0.0254, -5 * 0.0254], [15 * 0.0254, -5 * 0.0254]], atol=1e-12)
     np.testing.assert_allclose(drawn.fold, [[0, 0], [22 * 0.0254, 0]], atol=1e-12)
+    # a one-size piece whose name has an underscore stays whole beside the graded ones
+    doc = ezdxf.readfile(path)
+    flap = doc.blocks.new("POCKET_FLAP")
+    flap.add_polyline2d([(0, 0), (5, 0), (5, 3), (0, 3)], close=True, dxfattribs={"layer": "1"})
+    doc.modelspace().add_blockref("POCKET_FLAP", (30, 0))
+    doc.saveas(tmp_path / "flap.dxf")
+    assert [p.name for p in read_dxf(tmp_path / "flap.dxf", size="S")] == ["FRONT", "POCKET_FLAP"]
     # without a sample size, a graded file asks for one
     with pytest.raises(PatternError, match=r"graded file \(sizes S, M, L\) without a 'Sample Size:' text"):
         read_dxf(graded_file(tmp_path / "nosample.dxf", sample=None))

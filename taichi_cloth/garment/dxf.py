@@ -176,10 +176,17 @@ def read_dxf(path, units: str | None = None, tolerance: float | None = None, siz
 def _of_size(found: list, size: str | None, sample: str | None, path: Path) -> list:
     """The pieces of one size of a graded file (a block's "Size:" text, else, in a file with a "Sample Size:"
     text, the end of a block named <piece>_<size>), named without the size; every piece of a file not graded."""
+    # a name's end is a size when the file has a sample size and the same piece comes in two sizes or more (a
+    # one-size POCKET_FLAP beside graded FRONT_S, FRONT_M is a piece, not the pocket in size FLAP)
+    tails: dict[str, set] = {}
+    for piece, _ in found:
+        base, _, tail = piece.name.rpartition("_")
+        tails.setdefault(base, set()).add(tail)
     sized = []
     for piece, own in found:
         base, _, tail = piece.name.rpartition("_")
-        own = own or (tail if sample is not None and base else None)
+        if own is None and sample is not None and base and (len(tails[base]) > 1 or tail == sample):
+            own = tail
         if own is not None and piece.name.endswith(f"_{own}"):
             piece = dataclasses.replace(piece, name=piece.name[:-len(own) - 1])
         sized.append((piece, own))
