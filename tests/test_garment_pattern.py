@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from taichi_cloth.errors import PatternError
-from taichi_cloth.garment.dxf import dxf_units, read_dxf, write_dxf
+from taichi_cloth.garment.dxf import dxf_units, read_dxf, write_aama_dxf, write_dxf
 from taichi_cloth.garment.garmentfile import load_garment
 from taichi_cloth.garment.pattern import (
     PatternPiece,
@@ -639,3 +639,17 @@ def test_a_garment_file_takes_its_seam_allowance_off_a_dxf_s_cut_lines(tmp_path)
                                                  "{ at = [10, 0] }, { at = [0, 10] }]"))
     with pytest.raises(PatternError, match="an outline or a copy is a sew line already"):
         load_garment(tmp_path / "g.toml")
+
+
+def test_write_aama_dxf_round_trips_lines_and_arcs_and_refuses_what_aama_cannot_hold(tmp_path):
+    disk, square = circle_piece(0.1), PatternPiece.from_polygon("sq", [[0, 0], [0.3, 0], [0.3, 0.2], [0, 0.2]])
+    path = write_aama_dxf([disk, square], tmp_path / "a.dxf", units="mm")
+    assert ezdxf.readfile(path).header.get("$INSUNITS", 0) == 0 and dxf_units(path) == "mm"
+    back = {p.name: p for p in read_dxf(path)}
+    assert [s.kind for s in back["disk"].segments] == ["arc", "arc"]
+    assert back["disk"].area() == pytest.approx(disk.area(), rel=1e-12)
+    np.testing.assert_allclose(back["sq"].corners, square.corners, rtol=0, atol=1e-15)
+    with pytest.raises(PatternError, match="AAMA files are in inches or millimetres"):
+        write_aama_dxf([disk], tmp_path / "b.dxf", units="cm")
+    with pytest.raises(PatternError, match="sample_size 'L' is not one of the sizes S, M"):
+        write_aama_dxf({"S": [disk], "M": [disk]}, tmp_path / "c.dxf", sample_size="L")

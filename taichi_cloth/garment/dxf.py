@@ -39,9 +39,8 @@ Reading (`read_dxf`):
   * An AAMA block's outline has its corners where pattern CAD marks them: at its turn points (layer 2, where
     grade-rule labels sit), at its notches (layer 4; a straight edge is split there, the corner named
     "notch<k>" in loop order), where a curve meets, and, where no turn point is marked, where it turns by
-    more than AAMA_CORNER_TURN; the
-    straight edges between are one "polyline" (a boundary exported as one closed polyline would otherwise have a
-    corner at every vertex).
+    more than AAMA_CORNER_TURN; the straight edges between are one "polyline" (a boundary exported as one
+    closed polyline would otherwise have a corner at every vertex).
   * Corner names: in an AAMA block (one with entities on the boundary layer "1"), only the texts on layer "1"
     name corners; anywhere, a text that is an AAMA grade-rule label ("# 12") is not a name, and a name that two
     corners of one piece would share is given to the first, the second keeping its default "c<i>".
@@ -250,13 +249,13 @@ def _label(e) -> str:
     return e.plain_text() if e.dxftype() == "MTEXT" else str(e.dxf.text)
 
 
-def _key_text(doc, path: Path, pattern: re.Pattern, what: str) -> str | None:
-    """The value of the "Key: value" TEXTs or MTEXTs matching `pattern` in the model space or any block, or None
-    if there is none; PatternError naming `what` if two give different values."""
+def _key_text(doc, path: Path, key: re.Pattern, what: str) -> str | None:
+    """The value of the "Key: value" TEXTs or MTEXTs matching `key` in the model space or any block, or None if
+    there is none; PatternError naming `what` if two give different values."""
     found: dict[str, str] = {}
     for layout in (doc.modelspace(), *doc.blocks):
         for e in layout.query("TEXT MTEXT"):
-            m = pattern.match(_label(e))
+            m = key.match(_label(e))
             if m is not None:
                 found.setdefault(m.group(1), _label(e).strip())
     if len(found) > 1:
@@ -454,7 +453,6 @@ def _aama_corners(segs: list, turns: np.ndarray, notches: np.ndarray, tol: float
             pts = np.vstack([run[0].points] + [r.points[1:] for r in run[1:]])
             out.append(Segment("polyline", pts))
     return out, notched
-
 
 
 def _default_tol(entities, scale: float) -> float:
@@ -781,24 +779,21 @@ def write_aama_dxf(pieces, path, units: str = "in", sample_size: str | None = No
             if not is_valid_layer_name(name) or name in doc.blocks:
                 raise PatternError(f"write_aama_dxf: piece name {name!r} is not a valid block name or is used twice")
             block = doc.blocks.new(name)
-            vertices = []
+            vertices = []  # (x, y, bulge) [file units]: each segment's points but its last, the next one's first
             for seg in piece.segments:
-                pts = seg.points if seg.kind in ("line", "polyline") else (seg.points[:1] if seg.kind == "arc"
-                                                                          else seg.sample(tolerance))
-                vertices += [(*(p / scale), seg.bulge if seg.kind == "arc" and k == 0 else 0.0)
-                             for k, p in enumerate(pts[:-1] if seg.kind != "arc" else pts)]
-            block.add_polyline2d([(x, y) for x, y, _ in vertices], format="xy", close=True,
-                                 dxfattribs={"layer": _AAMA_BOUNDARY_LAYER})
-            poly = next(iter(block.query("POLYLINE")))
-            for v, (_, _, bulge) in zip(poly.vertices, vertices):
-                v.dxf.bulge = bulge
+                if seg.kind == "arc":
+                    vertices.append((*(seg.start / scale), seg.bulge))
+                else:
+                    pts = seg.points if seg.kind in ("line", "polyline") else seg.sample(tolerance)
+                    vertices += [(*(p / scale), 0.0) for p in pts[:-1]]
+            block.add_polyline2d(vertices, format="xyb", close=True, dxfattribs={"layer": _AAMA_BOUNDARY_LAYER})
             height = 0.01 * piece.size() / scale or 1.0
             for k, (label, corner) in enumerate(zip(piece.corner_names, piece.corners)):
                 at = {"insert": tuple(corner / scale), "height": height}
                 block.add_text(f"# {k}", dxfattribs={"layer": _AAMA_TURN_LAYER, **at})
                 block.add_text(label, dxfattribs={"layer": _AAMA_BOUNDARY_LAYER, **at})
-            lo, hi = (np.vstack([s.points for s in piece.segments]).min(axis=0) / scale,
-                      np.vstack([s.points for s in piece.segments]).max(axis=0) / scale)
+            points = np.vstack([s.points for s in piece.segments]) / scale
+            lo, hi = points.min(axis=0), points.max(axis=0)
             mid, quarter = 0.5 * (lo + hi), 0.25 * (hi[1] - lo[1])
             block.add_line((mid[0], mid[1] - quarter), (mid[0], mid[1] + quarter),
                            dxfattribs={"layer": _AAMA_GRAIN_LAYER})
