@@ -151,7 +151,7 @@ def read_dxf(path, units: str | None = None, tolerance: float | None = None, siz
     for src in _sources(doc):
         loops = _source_loops(src, path, scale, unit_name, tolerance)
         for name, loop, names, tol in loops:
-            lines = [None if line is None or len(loops) > 1 else _line_tuple(line * scale)
+            lines = [None if line is None or len(loops) > 1 else pattern._line(line * scale)
                      for line in (src.grain, src.fold)]
             piece = PatternPiece(name, loop, names, *lines)
             try:
@@ -202,10 +202,6 @@ def _of_size(found: list, size: str | None, sample: str | None, path: Path) -> l
     if want not in sizes:
         raise PatternError(f"{path}: no size {want!r} in the file; its sizes are {', '.join(sizes)}")
     return [p for p, own in sized if own is None or own == want]
-
-
-def _line_tuple(points: np.ndarray) -> tuple:
-    return tuple((float(x), float(y)) for x, y in points)
 
 
 def dxf_units(path) -> str:

@@ -97,8 +97,9 @@ def load_garment(path, material: Material | None = None) -> GarmentSpec:
 def garment_from_dict(data: dict, path, material: Material | None = None, dxf_reader=None) -> GarmentSpec:
     """The GarmentSpec of a garment file's parsed content `data` (what tomllib gives), checked as load_garment
     checks a file: as if it were the file at `path`, which names it in every message and whose folder a relative
-    `dxf` is read from. `dxf_reader(path, units=None) -> [PatternPiece]` reads the DXF (default read_dxf; the
-    pattern studio passes one that keeps what it has read, since it checks the set-up after every edit)."""
+    `dxf` is read from. `dxf_reader(path, units=None, size=None, as_drawn=False) -> [PatternPiece]` reads the DXF
+    (default read_dxf; the pattern studio passes one that keeps what it has read, since it checks the set-up after
+    every edit)."""
     path = Path(path)
     label = str(path)
     cfg = Validator(label, PatternError).table(GARMENT_SCHEMA, data, "", "")

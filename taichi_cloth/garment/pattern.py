@@ -715,11 +715,11 @@ class PatternPiece:
 
         return PatternPiece(self.name if name is None else name, segs, names, move(self.grain), move(self.fold))
 
-
     def rotated(self, angle: float) -> "PatternPiece":
         """Copy turned by `angle` [deg] counter-clockwise about the origin (grain and fold lines with it)."""
         a = math.radians(float(angle))
         m = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
+
         def turn(line):
             return None if line is None else _line(np.asarray(line) @ m.T)
 
