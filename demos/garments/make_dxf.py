@@ -1,12 +1,15 @@
 """Write the shipped garments' pattern pieces as DXF files (what a garment CAD system would export), and a garment
 file beside each that takes its pieces from the DXF instead of from inline outlines:
 
-    python demos/garments/make_dxf.py          # writes skirt.dxf, top.dxf, tshirt.dxf and *_dxf.toml here
+    python demos/garments/make_dxf.py          # writes skirt.dxf, top.dxf, tshirt.dxf and *_dxf.toml here,
+                                               # and tshirt_aama.dxf and tshirt_aama.toml
 
 The DXF holds one layer per piece (the piece's name), one entity per outline segment (LINE, LWPOLYLINE with
 bulges, SPLINE) and a TEXT naming each corner, in centimetres. The *_dxf.toml files repeat the seams and
 placements of their source file and name the DXF; `python -m taichi_cloth run` on a scene that points at one
-sews the same garment.
+sews the same garment. tshirt_aama.dxf is the T-shirt as pattern CAD exports it (AAMA / ASTM D6673: a block per
+piece and size, graded S, M and L at 95, 100 and 105 %, sample size M, in inches with no $INSUNITS, curves as
+polylines); tshirt_aama.toml sews its sample size (`dxf_size = "S"` another).
 """
 import sys
 import tomllib
@@ -14,6 +17,8 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 GARMENTS = ("skirt", "top", "tshirt")
+#: the graded sizes of tshirt_aama.dxf: name and scale of the shipped T-shirt
+AAMA_SIZES = {"S": 0.95, "M": 1.0, "L": 1.05}
 
 
 def _value(v) -> str:
@@ -43,7 +48,7 @@ def dxf_garment_text(source: dict, dxf_name: str) -> str:
 
 
 def main(folder: Path = HERE) -> list[Path]:
-    from taichi_cloth.garment.dxf import write_dxf
+    from taichi_cloth.garment.dxf import write_aama_dxf, write_dxf
     from taichi_cloth.garment.garmentfile import load_garment
 
     written = []
@@ -55,6 +60,14 @@ def main(folder: Path = HERE) -> list[Path]:
         toml = folder / f"{name}_dxf.toml"
         toml.write_text(dxf_garment_text(raw, f"{name}.dxf"), encoding="utf-8")
         written.append(toml)
+    tshirt = load_garment(HERE / "tshirt.toml")
+    graded = {size: [p.transformed(scale=k) for p in tshirt.pieces] for size, k in AAMA_SIZES.items()}
+    written.append(write_aama_dxf(graded, folder / "tshirt_aama.dxf", units="in", sample_size="M"))
+    raw = tomllib.loads((HERE / "tshirt.toml").read_text(encoding="utf-8"))
+    text = dxf_garment_text(raw, "tshirt_aama.dxf").replace("tshirt_dxf", "tshirt_aama")
+    written.append(folder / "tshirt_aama.toml")
+    written[-1].write_text(text.replace("the same garment", "the same garment in its sample size M"),
+                           encoding="utf-8")
     return written
 
 
