@@ -114,6 +114,7 @@ def test_stitches_pair_the_ends_that_meet_and_gather_up_to_the_limit(tmp_path):
     (lambda s: s["pattern"]["stitches"][0][1].update(edge=7), "stitch 0: no edge 7 on a panel 'back'"),
     (lambda s: s["properties"].update(curvature_coords="absolute"), "only 'relative'"),
     (lambda s: s.pop("pattern"), "the file has no 'pattern'"),
+    (lambda s: s["pattern"]["panels"]["back"]["edges"][0].update(curvature=3), "curvature must be a table"),
 ])
 def test_a_broken_specification_is_refused_in_one_line_naming_where(tmp_path, edit, words):
     spec = skirt()

@@ -57,7 +57,9 @@ def load_specification(path, material: str | Material = "cotton", spacing: float
 
 def _garment(spec, path: Path, material, spacing: float) -> GarmentSpec:
     pattern = _get(spec, "pattern", dict, "the file")
-    props = spec.get("properties", {}) if isinstance(spec, dict) else {}
+    props = spec.get("properties") or {}
+    if not isinstance(props, dict):
+        raise PatternError(f"properties must be a table, got {type(props).__name__}")
     if props.get("curvature_coords", "relative") != "relative":
         raise PatternError(f"properties.curvature_coords is {props.get('curvature_coords')!r}; only 'relative' "
                            f"(pygarment's) is read")
@@ -135,6 +137,8 @@ def _segment(start: np.ndarray, end: np.ndarray, curvature, scale: float, where:
         return Segment.line(start, end)
     if isinstance(curvature, list):  # pygarment's older form: the quadratic's control point
         curvature = {"type": "quadratic", "params": [curvature]}
+    if not isinstance(curvature, dict):
+        raise PatternError(f"{where}: curvature must be a table (type, params), got {curvature!r}")
     kind, params = curvature.get("type"), curvature.get("params")
     e = end - start
     perp = np.array([-e[1], e[0]])
