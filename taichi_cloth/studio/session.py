@@ -27,7 +27,7 @@ from pathlib import Path
 from ..errors import PatternError
 from ..garment.dxf import dxf_units, read_dxf
 from ..garment.garment import RESOLUTIONS, FreePlacement
-from ..garment.garmentfile import garment_from_dict
+from ..garment.garmentfile import GARMENT_SCHEMA, garment_from_dict
 from ..garment.pattern import unit_scale
 from ..garment.seams import DEFAULT_LENGTH_TOLERANCE, plan_counts
 from ..guards import check_memory, sheet_particles
@@ -46,10 +46,11 @@ DEFAULT_SPACING = 0.02
 UNDO_DEPTH = 200
 MATERIAL_KEYS = ("density", "stretch", "shear", "bend", "damping", "viscosity")
 PLACEMENT_KEYS = ("anchor", "at", "offset", "height", "angle", "wrap")
-#: a DXF piece's pattern options in a garment file (taichi_cloth.garment.garmentfile) and their defaults
-PIECE_PATTERN_DEFAULTS = {"rotate": None, "unfold": True, "seam_allowance": None}
+#: a DXF piece's pattern options in a garment file and their defaults (the garment file's schema says them)
+PIECE_PATTERN_DEFAULTS = {k: GARMENT_SCHEMA.fields["pieces"].table.fields[k].default
+                          for k in ("rotate", "unfold", "seam_allowance")}
 #: the DXF file's options at a garment file's top level and their defaults
-DXF_DEFAULTS = {"dxf_units": None, "dxf_size": None, "seam_allowance": 0.0}
+DXF_DEFAULTS = {k: GARMENT_SCHEMA.fields[k].default for k in ("dxf_units", "dxf_size", "seam_allowance")}
 
 
 def guess_anchor(piece: str) -> str:
