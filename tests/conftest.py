@@ -18,12 +18,12 @@ os.environ.setdefault("TI_ADVANCED_OPTIMIZATION", "0")
 #: while the other waits, so these go first and the short ones fill in at the end
 LONGEST_FIRST = ("test_collision.py", "test_implicit_multigrid.py", "test_physics.py", "test_self_collision_stress.py",
                  "test_demo_garments.py", "test_multilevel.py", "test_multilevel_garment.py", "test_rest.py",
-                 "test_self_collision.py", "test_aggregation_rigid.py", "test_stability.py", "test_explicit_lean.py",
-                 "test_body_scene.py", "test_hardening.py", "test_moving_colliders.py", "test_garment.py",
-                 "test_host_reads.py", "test_determinism.py", "test_demo_scenes.py", "test_loop_policy.py",
-                 "test_quality.py", "test_adaptive_step.py", "test_implicit_newton.py", "test_components.py",
-                 "test_recording_and_cli.py", "test_scenefile.py", "test_tradeoff.py", "test_studio.py",
-                 "test_batch.py")
+                 "test_garmentcode.py", "test_self_collision.py", "test_aggregation_rigid.py", "test_stability.py",
+                 "test_explicit_lean.py", "test_body_scene.py", "test_hardening.py", "test_moving_colliders.py",
+                 "test_garment.py", "test_host_reads.py", "test_determinism.py", "test_demo_scenes.py",
+                 "test_loop_policy.py", "test_quality.py", "test_adaptive_step.py", "test_implicit_newton.py",
+                 "test_components.py", "test_recording_and_cli.py", "test_scenefile.py", "test_tradeoff.py",
+                 "test_studio.py", "test_batch.py")
 
 
 def pytest_collection_modifyitems(config, items):

@@ -1,8 +1,12 @@
 """GarmentCode specifications read as garments (taichi_cloth.garment.garmentcode): edges and their curvatures,
-the panels' 3D frames as placements, stitches as seams with their pick direction and gathers, and the refusals.
-The specifications here are written in the test, in pygarment's format."""
+the panels' 3D frames as placements, stitches as seams with their pick direction and gathers, and the refusals,
+on specifications written in the test in pygarment's format; and the shipped ones (demos/garments/*.json: trousers,
+a dress, a flared skirt) sew and rest on the mannequin."""
 import json
 import math
+import sys
+import tomllib
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -10,8 +14,10 @@ import pytest
 from taichi_cloth.body import Body
 from taichi_cloth.errors import PatternError
 from taichi_cloth.garment.garment import FreePlacement, build_garment
-from taichi_cloth.garment.garmentcode import GATHER_LIMIT, load_specification
+from taichi_cloth.garment.garmentcode import GATHER_LIMIT, read_specification
 from taichi_cloth.garment.garmentfile import load_garment
+from taichi_cloth.material import material
+from taichi_cloth.scenefile import load_scene
 
 #: a half circle skirt [cm]: waist radius 15 (a 94 cm waist over the two halves), 40 cm long, front and back
 WAIST, LENGTH = 15.0, 40.0
@@ -51,7 +57,10 @@ def write(tmp_path, spec, name="specification.json"):
 
 
 def test_a_specification_s_panels_are_pieces_with_their_curves_in_metres(tmp_path):
-    g = load_specification(write(tmp_path, skirt()))
+    path = write(tmp_path, skirt())
+    doc = read_specification(path)  # the garment file it reads as: in the specification's centimetres
+    assert doc["units"] == "cm" and doc["spacing"] == 2.0 and doc["pieces"][0]["placement"]["origin"] == [0, 104, 18]
+    g = load_garment(path)
     assert g.name == tmp_path.name and [p.name for p in g.pieces] == ["front", "back"]
     front = g.pieces[0]
     assert front.corner_names == ["v0", "v1", "v2", "v3"] and [s.kind for s in front.segments] == ["line", "arc",
@@ -70,7 +79,7 @@ def test_bezier_edges_follow_pygarment_s_relative_control_points(tmp_path):
     edges = spec["pattern"]["panels"]["front"]["edges"]
     edges[0]["curvature"] = {"type": "quadratic", "params": [[0.5, 0.25]]}
     edges[2]["curvature"] = {"type": "cubic", "params": [[0.25, -0.1], [0.75, 0.1]]}
-    front = load_specification(write(tmp_path, spec)).pieces[0]
+    front = load_garment(write(tmp_path, spec)).pieces[0]
     start, end = np.array([-0.15, 0.0]), np.array([-0.55, 0.0])
     e = end - start
     control = start + 0.5 * e + 0.25 * np.array([-e[1], e[0]])  # start + t e + k perp(e)
@@ -83,7 +92,7 @@ def test_bezier_edges_follow_pygarment_s_relative_control_points(tmp_path):
 
 
 def test_stitches_pair_the_ends_that_meet_and_gather_up_to_the_limit(tmp_path):
-    g = load_specification(write(tmp_path, skirt()))
+    g = load_garment(write(tmp_path, skirt()))
     left, right = g.seams
     # front v0 -> v1 (the left side, waist to hem) meets back v0 -> v3: the back's edge 3 runs v3 -> v0
     assert (left.a.piece, left.a.start, left.a.end) == ("front", "v0", "v1")
@@ -94,14 +103,14 @@ def test_stitches_pair_the_ends_that_meet_and_gather_up_to_the_limit(tmp_path):
     spec["pattern"]["panels"]["back"]["vertices"][3] = [-WAIST - 0.8 * LENGTH, 0]
     spec["pattern"]["panels"]["back"]["vertices"][2] = [WAIST + 0.8 * LENGTH, 0]
     spec["pattern"]["panels"]["back"]["edges"][2]["curvature"]["params"][0] = WAIST + 0.8 * LENGTH
-    gathered = load_specification(write(tmp_path, spec)).seams[0]
+    gathered = load_garment(write(tmp_path, spec)).seams[0]
     assert 0.2 < gathered.tolerance <= GATHER_LIMIT
     spec["pattern"]["panels"]["back"]["vertices"][3] = [-WAIST - 0.7 * LENGTH, 0]
     spec["pattern"]["panels"]["back"]["vertices"][2] = [WAIST + 0.7 * LENGTH, 0]
     spec["pattern"]["panels"]["back"]["edges"][2]["curvature"]["params"][0] = WAIST + 0.7 * LENGTH
     with pytest.raises(PatternError, match=r"stitch 0: its edges are 40.0 and 28.0 cm long, 30 % apart: more than "
                                            r"the 25 % a seam gathers"):
-        load_specification(write(tmp_path, spec))
+        load_garment(write(tmp_path, spec))
 
 
 @pytest.mark.parametrize("edit, words", [
@@ -120,17 +129,50 @@ def test_a_broken_specification_is_refused_in_one_line_naming_where(tmp_path, ed
     spec = skirt()
     edit(spec)
     with pytest.raises(PatternError) as info:
-        load_specification(write(tmp_path, spec))
+        load_garment(write(tmp_path, spec))
     assert words in str(info.value) and "specification.json" in str(info.value) and "\n" not in str(info.value)
     (tmp_path / "junk.json").write_text("{not json")
     with pytest.raises(PatternError, match="junk.json: not a readable GarmentCode specification"):
-        load_specification(tmp_path / "junk.json")
+        load_garment(tmp_path / "junk.json")
 
 
 def test_load_garment_reads_a_specification_and_the_skirt_builds_with_its_seams_planned(tmp_path):
     g = load_garment(write(tmp_path, skirt(), "half_circle.json"))
-    assert g.name == "half_circle" and g.material == "cotton" and g.spacing == 0.02
+    assert g.name == "half_circle" and g.material == material("cotton") and g.spacing == pytest.approx(0.02, rel=1e-12)
     built = build_garment(g, Body.from_mannequin())
     assert built.piece_names == ["front", "back"]
     counts = np.bincount(built.seam_of_pair)
     assert len(counts) == 2 and counts[0] == counts[1] == round(0.40 / 0.02) + 1  # 40 cm sides at 2 cm
+
+
+DEMOS = Path(__file__).resolve().parents[1] / "demos"
+#: the GarmentCode garments shipped in demos/garments, with their scenes in demos/scenes
+SHIPPED = ("trousers", "dress", "flared_skirt")
+
+
+def test_the_shipped_specifications_are_what_make_garmentcode_writes(tmp_path):
+    """demos/garments/*.json are generated (make_garmentcode.py): the files match the script, so an edit to one is
+    not lost at the next run of the other."""
+    sys.path.insert(0, str(DEMOS / "garments"))
+    try:
+        import make_garmentcode
+    finally:
+        sys.path.pop(0)
+    for name in SHIPPED:
+        assert json.loads((DEMOS / "garments" / f"{name}.json").read_text()) == make_garmentcode.GARMENTS[name]()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", SHIPPED)
+def test_a_shipped_garmentcode_garment_sews_and_rests_on_the_mannequin_at_2_cm(name):
+    """demos/scenes/sew_NAME.toml as shipped (2 cm, cotton, the implicit step): every seam joined, at rest by the
+    scene's criterion within 5 s of simulated time, no particle inside the body, the stretch limit and the body
+    agreeing, and no two of the garment's triangles crossing at the end."""
+    config = tomllib.loads((DEMOS / "scenes" / f"sew_{name}.toml").read_text(encoding="utf-8"))
+    config["output"] = {"record": False}
+    scene = load_scene(config, frames=300, base_dir=DEMOS / "scenes").scene
+    summary = scene.run(300, progress=False, until_rest=True)
+    text = summary.format()
+    assert scene.controller("sewing").joined and summary.stopped_at_rest and scene.state.t <= 5.0, text
+    assert "stretch limit and colliders agree" in text and "no particle inside a collider" in text, text
+    assert "self-intersection: 0 intersecting triangle pairs now" in text, text

@@ -521,3 +521,23 @@ def test_a_dxf_piece_s_pattern_options_and_the_dxf_s_options_are_set_saved_and_u
     assert saved["pieces"][0]["unfold"] is False and saved["pieces"][0]["rotate"] == 0
     ok(c.post("/api/undo"))
     assert ok(c.get("/api/state"))["pattern_options"] == {"FRONT": {}}
+
+
+def test_a_garmentcode_specification_opens_and_saves_as_the_garment_file_it_reads_as(folder):
+    shutil.copy(GARMENTS / "trousers.json", folder / "trousers.json")
+    c = client(folder)
+    assert "trousers.json" in ok(c.get("/api/files"))["files"]
+    state = ok(c.post("/api/open", json={"path": "trousers.json"}))["state"]
+    assert state["units"] == "cm" and [p["name"] for p in state["pieces"]] == [
+        "front_left", "front_right", "back_left", "back_right"]
+    assert len(state["seams"]) == 10
+    ok(c.post("/api/save", json={"path": "trousers.toml"}))
+    saved, read = load_garment(folder / "trousers.toml"), load_garment(folder / "trousers.json")
+    assert saved.seams == read.seams and saved.placements == read.placements
+    for a, b in zip(saved.pieces, read.pieces):
+        assert a.corner_names == b.corner_names and a.area() == pytest.approx(b.area(), rel=1e-9)
+    r = ok(c.post("/api/upload", files={"file": ("pants.json", (folder / "trousers.json").read_bytes())}))
+    assert r["kept"] == "pants.json" and r["state"]["name"] == "pants" and len(r["state"]["pieces"]) == 4
+    r = c.post("/api/upload", files={"file": ("broken.json", b"{not json")})
+    assert r.status_code == 400 and "broken.json: not a readable GarmentCode specification" in r.json()["error"]
+    assert not (folder / "broken.json").exists()

@@ -28,34 +28,35 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import PatternError
-from ..material import Material
-from .garment import FreePlacement, GarmentSpec
-from .pattern import PatternPiece, Segment
-from .seams import DEFAULT_LENGTH_TOLERANCE, Seam, SeamSide
+from .seams import DEFAULT_LENGTH_TOLERANCE
 
-__all__ = ["GATHER_LIMIT", "load_specification"]
+__all__ = ["GATHER_LIMIT", "read_specification"]
 
 #: the largest relative length mismatch a stitch may gather (a ruffle's edge is longer than its partner's)
 GATHER_LIMIT = 0.25
 #: the margin added to a stitch's own mismatch for its seam's tolerance (the meshed sides round differently)
 _MISMATCH_MARGIN = 0.02
+#: the garment file's unit for pygarment's units_in_meter (any other: converted to metres)
+_UNITS = {1: "m", 100: "cm", 1000: "mm"}
 
 
-def load_specification(path, material: str | Material = "cotton", spacing: float = 0.02) -> GarmentSpec:
-    """The GarmentSpec of the GarmentCode `specification.json` at `path` (module docstring): its panels as pieces
-    with free placements, its stitches as seams; `material` and `spacing` [m] as in a garment file."""
+def read_specification(path) -> dict:
+    """The garment file (as tomllib would parse it: taichi_cloth.garment.garmentfile) of the GarmentCode
+    `specification.json` at `path` (module docstring): its panels as pieces with inline outlines and free
+    placements, its stitches as seams; cotton at 2 cm. load_garment reads a .json file through this; the pattern
+    studio opens one as a new garment file."""
     path = Path(path)
     try:
         spec = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise PatternError(f"{path}: not a readable GarmentCode specification ({exc})") from None
     try:
-        return _garment(spec, path, material, spacing)
+        return _document(spec, path)
     except PatternError as exc:
         raise PatternError(f"{path}: {exc}") from None
 
 
-def _garment(spec, path: Path, material, spacing: float) -> GarmentSpec:
+def _document(spec, path: Path) -> dict:
     pattern = _get(spec, "pattern", dict, "the file")
     props = spec.get("properties") or {}
     if not isinstance(props, dict):
@@ -63,25 +64,25 @@ def _garment(spec, path: Path, material, spacing: float) -> GarmentSpec:
     if props.get("curvature_coords", "relative") != "relative":
         raise PatternError(f"properties.curvature_coords is {props.get('curvature_coords')!r}; only 'relative' "
                            f"(pygarment's) is read")
-    units = props.get("units_in_meter", 100)
-    if isinstance(units, bool) or not isinstance(units, (int, float)) or not units > 0:
-        raise PatternError(f"properties.units_in_meter must be a number > 0, got {units!r}")
-    scale = 1.0 / float(units)
+    per_metre = props.get("units_in_meter", 100)
+    if isinstance(per_metre, bool) or not isinstance(per_metre, (int, float)) or not per_metre > 0:
+        raise PatternError(f"properties.units_in_meter must be a number > 0, got {per_metre!r}")
+    units = _UNITS.get(per_metre, "m")
+    scale = 1.0 if units != "m" else 1.0 / float(per_metre)  # file units -> the document's
+    metres = {"m": 1.0, "cm": 0.01, "mm": 0.001}[units]  # the document's units -> m
     panels = _get(pattern, "panels", dict, "pattern")
     order = pattern.get("panel_order") or list(panels)
-    pieces, placements, frames = [], {}, {}
+    pieces, placed = [], {}
     for name in order:
         if name not in panels:
             raise PatternError(f"pattern.panel_order names {name!r}, which is not a panel")
-        piece, frame = _panel(name, panels[name], scale)
-        pieces.append(piece)
-        frames[name] = frame
-        origin, axes = frame
-        placements[name] = FreePlacement(tuple(origin), tuple(axes[:, 0]), tuple(axes[:, 1]), (0.0, 0.0))
-    by_name = {p.name: p for p in pieces}
-    seams = [_stitch(k, st, by_name, frames) for k, st in enumerate(_get(pattern, "stitches", list, "pattern"))]
-    return GarmentSpec(name=path.parent.name if path.stem == "specification" else path.stem, pieces=pieces,
-                       seams=seams, placements=placements, material=material, spacing=spacing)
+        entry, corners3d, lengths = _panel(name, panels[name], scale)
+        pieces.append(entry)
+        placed[name] = (corners3d, [metres * x for x in lengths], [c["name"] for c in entry["outline"]])
+    seams = [_stitch(k, st, placed) for k, st in enumerate(_get(pattern, "stitches", list, "pattern"))]
+    spacing = round(0.02 / metres, 12)
+    return {"name": path.parent.name if path.stem == "specification" else path.stem, "units": units,
+            "material": "cotton", "spacing": spacing, "pieces": pieces, "seams": seams}
 
 
 def _get(table, key: str, kind: type, where: str):
@@ -93,8 +94,9 @@ def _get(table, key: str, kind: type, where: str):
     return value
 
 
-def _panel(name: str, panel, scale: float) -> tuple[PatternPiece, tuple[np.ndarray, np.ndarray]]:
-    """(the piece [m], its 3D frame: origin (3,) [m] and axes (3, 3), columns u, v, normal)."""
+def _panel(name: str, panel, scale: float) -> tuple[dict, np.ndarray, list]:
+    """(the garment file's [[pieces]] entry, its corners placed (k, 3) and its edges' lengths, in the document's
+    units: the file's x scale)."""
     where = f"panel {name!r}"
     try:
         vertices = np.asarray(_get(panel, "vertices", list, where), dtype=np.float64) * scale
@@ -104,8 +106,10 @@ def _panel(name: str, panel, scale: float) -> tuple[PatternPiece, tuple[np.ndarr
         raise PatternError(f"{where}: vertices, translation and rotation must be numbers") from None
     if vertices.ndim != 2 or vertices.shape[1] != 2 or translation.shape != (3,) or rotation.shape != (3,):
         raise PatternError(f"{where}: vertices must be [x, y] pairs, translation and rotation three numbers each")
+    if not (np.all(np.isfinite(vertices)) and np.all(np.isfinite(translation)) and np.all(np.isfinite(rotation))):
+        raise PatternError(f"{where}: vertices, translation and rotation must be finite")
     edges = _get(panel, "edges", list, where)
-    segments, names = [], []
+    outline, corners, lengths = [], [], []
     for k, edge in enumerate(edges):
         ends = _get(edge, "endpoints", list, f"{where} edge {k}")
         if len(ends) != 2 or not all(isinstance(i, int) and 0 <= i < len(vertices) for i in ends):
@@ -114,12 +118,16 @@ def _panel(name: str, panel, scale: float) -> tuple[PatternPiece, tuple[np.ndarr
         if ends[1] != nxt[0]:
             raise PatternError(f"{where}: edge {k} ends at vertex {ends[1]} but the next edge starts at {nxt[0]}: "
                                f"the edges must run round the panel in order")
-        segments.append(_segment(vertices[ends[0]], vertices[ends[1]], edge.get("curvature"), scale,
-                                 f"{where} edge {k}"))
-        names.append(f"v{ends[0]}")
-    piece = PatternPiece(name, segments, names)
-    piece.validate()
-    return piece, (translation, _euler_xyz(rotation))
+        corner, length = _corner(vertices[ends[0]], vertices[ends[1]], edge.get("curvature"), scale,
+                                 f"{where} edge {k}")
+        outline.append({"name": f"v{ends[0]}", **corner})
+        corners.append(vertices[ends[0]])
+        lengths.append(length)
+    axes = _euler_xyz(rotation)
+    entry = {"name": name, "outline": outline,
+             "placement": {"origin": translation.tolist(), "u_axis": axes[:, 0].tolist(),
+                           "v_axis": axes[:, 1].tolist(), "at": [0.0, 0.0]}}
+    return entry, translation + np.asarray(corners) @ axes[:, :2].T, lengths
 
 
 def _euler_xyz(degrees: np.ndarray) -> np.ndarray:
@@ -131,28 +139,32 @@ def _euler_xyz(degrees: np.ndarray) -> np.ndarray:
     return rz @ ry @ rx
 
 
-def _segment(start: np.ndarray, end: np.ndarray, curvature, scale: float, where: str) -> Segment:
-    """The edge from start to end [m]; a circle's radius is in the file's units (x scale [m])."""
+def _corner(start: np.ndarray, end: np.ndarray, curvature, scale: float, where: str) -> tuple[dict, float]:
+    """(the outline corner at `start` with its edge to `end`: {"at"} and a "bspline" or "bulge", the edge's
+    length); a circle's radius is in the file's units (x scale)."""
+    corner = {"at": start.tolist()}
+    e = end - start
+    chord = float(np.linalg.norm(e))
     if curvature is None:
-        return Segment.line(start, end)
+        return corner, chord
     if isinstance(curvature, list):  # pygarment's older form: the quadratic's control point
         curvature = {"type": "quadratic", "params": [curvature]}
     if not isinstance(curvature, dict):
         raise PatternError(f"{where}: curvature must be a table (type, params), got {curvature!r}")
     kind, params = curvature.get("type"), curvature.get("params")
-    e = end - start
     perp = np.array([-e[1], e[0]])
     if kind in ("quadratic", "cubic"):
         n = 1 if kind == "quadratic" else 2
-        if not isinstance(params, list) or len(params) != n:
-            raise PatternError(f"{where}: a {kind} curvature needs {n} control point(s), got {params!r}")
+        if not isinstance(params, list) or len(params) != n or not all(
+                isinstance(p, list) and len(p) == 2 and all(_is_number(x) for x in p) for p in params):
+            raise PatternError(f"{where}: a {kind} curvature needs {n} control point(s) [t, k], got {params!r}")
         controls = [start + float(t) * e + float(k) * perp for t, k in params]
-        return Segment("bspline", np.array([start, *controls, end]), degree=n + 1)
+        points = np.array([start, *controls, end])
+        return {**corner, "bspline": [c.tolist() for c in controls]}, _bezier_length(points)
     if kind == "circle":
-        if not isinstance(params, list) or len(params) != 3:
+        if not isinstance(params, list) or len(params) != 3 or not _is_number(params[0]):
             raise PatternError(f"{where}: a circle curvature needs [radius, large_arc, right], got {params!r}")
         radius, large, right = float(params[0]) * scale, bool(params[1]), bool(params[2])
-        chord = float(np.linalg.norm(e))
         if not radius >= 0.5 * chord * (1 - 1e-9):
             raise PatternError(f"{where}: a circle of radius {radius / scale:g} cannot join ends {chord / scale:g} "
                                f"apart")
@@ -160,32 +172,47 @@ def _segment(start: np.ndarray, end: np.ndarray, curvature, scale: float, where:
         if large:
             sweep = 2.0 * math.pi - sweep
         # a positive bulge turns counter-clockwise: the arc lies to the right of the chord's direction
-        return Segment.arc(start, end, math.tan(0.25 * sweep) * (1.0 if right else -1.0))
+        return {**corner, "bulge": math.tan(0.25 * sweep) * (1.0 if right else -1.0)}, radius * sweep
     raise PatternError(f"{where}: unknown curvature type {kind!r} (line, circle, quadratic or cubic)")
 
 
-def _stitch(k: int, stitch, pieces: dict, frames: dict) -> Seam:
+def _is_number(x) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+
+
+def _bezier_length(points: np.ndarray, samples: int = 256) -> float:
+    """The length of the Bezier curve of control points (n, 2), to about 1e-5 of it (a chord sum; it only sets a
+    seam's tolerance)."""
+    t = np.linspace(0.0, 1.0, samples + 1)[:, None]
+    n = len(points) - 1
+    curve = sum(math.comb(n, i) * t ** i * (1 - t) ** (n - i) * points[i] for i in range(n + 1))
+    return float(np.linalg.norm(np.diff(curve, axis=0), axis=1).sum())
+
+
+def _stitch(k: int, stitch, placed: dict) -> dict:
+    """The garment file's [[seams]] entry of stitch k: its two edges, the second run so that its ends meet the
+    first's where the panels are placed, and a tolerance that takes the stitch's gather."""
     where = f"stitch {k}"
     if not isinstance(stitch, list) or len(stitch) != 2:
         raise PatternError(f"{where}: must be two {{panel, edge}} tables, got {stitch!r}")
     sides, points = [], []
     for side in stitch:
         panel, edge = (side.get("panel"), side.get("edge")) if isinstance(side, dict) else (None, None)
-        if panel not in pieces or not isinstance(edge, int) or not 0 <= edge < len(pieces[panel].segments):
+        if (not isinstance(panel, str) or panel not in placed or isinstance(edge, bool) or not isinstance(edge, int)
+                or not 0 <= edge < len(placed[panel][1])):
             raise PatternError(f"{where}: no edge {edge!r} on a panel {panel!r}")
-        piece = pieces[panel]
-        start, end = piece.corner_names[edge], piece.corner_names[(edge + 1) % len(piece.segments)]
-        origin, axes = frames[panel]
-        ends = [origin + axes[:, :2] @ piece.corners[piece.corner_index(c)] for c in (start, end)]
-        sides.append([panel, start, end, piece.segments[edge].length()])
-        points.append(ends)
+        corners, lengths, names = placed[panel]
+        end = (edge + 1) % len(lengths)
+        sides.append({"piece": panel, "from": names[edge], "to": names[end], "length": lengths[edge]})
+        points.append((corners[edge], corners[end]))
     (a0, a1), (b0, b1) = points
     if np.linalg.norm(a0 - b0) + np.linalg.norm(a1 - b1) > np.linalg.norm(a0 - b1) + np.linalg.norm(a1 - b0):
-        sides[1][1], sides[1][2] = sides[1][2], sides[1][1]  # the b edge runs the other way round its panel
-    mismatch = abs(sides[0][3] - sides[1][3]) / max(sides[0][3], sides[1][3])
+        sides[1]["from"], sides[1]["to"] = sides[1]["to"], sides[1]["from"]  # the b edge runs the other way
+    la, lb = sides[0].pop("length"), sides[1].pop("length")
+    mismatch = abs(la - lb) / max(la, lb)
     if mismatch > GATHER_LIMIT:
-        raise PatternError(f"{where}: its edges are {100 * sides[0][3]:.1f} and {100 * sides[1][3]:.1f} cm long, "
-                           f"{100 * mismatch:.0f} % apart: more than the {100 * GATHER_LIMIT:.0f} % a seam gathers")
-    return Seam(f"{sides[0][0]}.{sides[0][1]}-{sides[1][0]}.{sides[1][1]}",
-                SeamSide(*sides[0][:3]), SeamSide(*sides[1][:3]),
-                tolerance=max(DEFAULT_LENGTH_TOLERANCE, min(GATHER_LIMIT, mismatch + _MISMATCH_MARGIN)))
+        raise PatternError(f"{where}: its edges are {100 * la:.1f} and {100 * lb:.1f} cm long, {100 * mismatch:.0f} % "
+                           f"apart: more than the {100 * GATHER_LIMIT:.0f} % a seam gathers")
+    a, b = sides
+    return {"name": f"{a['piece']}.{a['from']}-{b['piece']}.{b['from']}", "a": a, "b": b,
+            "tolerance": max(DEFAULT_LENGTH_TOLERANCE, min(GATHER_LIMIT, mismatch + _MISMATCH_MARGIN))}

@@ -55,7 +55,7 @@ from ..material import Material
 from ..schema import (MATERIAL_TABLE, Array, Field, Table, Validator, material_of, nonneg, nonzero, positive,
                       read_toml)
 from .garment import RESOLUTIONS, FixedPoint, FreePlacement, GarmentSpec
-from .garmentcode import load_specification
+from .garmentcode import read_specification
 from .pattern import PatternPiece, unit_scale
 from .placement import Placement
 from .seams import DEFAULT_LENGTH_TOLERANCE, Seam, SeamSide
@@ -91,11 +91,12 @@ GARMENT_SCHEMA = Table({
 
 def load_garment(path, material: Material | None = None) -> GarmentSpec:
     """Parse a garment file into a GarmentSpec (lengths in metres). `material` overrides the file's. A `.json` file
-    is a GarmentCode specification (taichi_cloth.garment.garmentcode: cotton at 2 cm unless `material`)."""
+    is a GarmentCode specification, read as the garment file taichi_cloth.garment.garmentcode.read_specification
+    makes of it (cotton at 2 cm unless `material`)."""
     path = Path(path)
-    if path.suffix.lower() == ".json":
-        return load_specification(path, material or "cotton")
-    return garment_from_dict(read_toml(path, str(path), "garment", PatternError), path, material)
+    data = (read_specification(path) if path.suffix.lower() == ".json"
+            else read_toml(path, str(path), "garment", PatternError))
+    return garment_from_dict(data, path, material)
 
 
 def garment_from_dict(data: dict, path, material: Material | None = None, dxf_reader=None) -> GarmentSpec:

@@ -1,4 +1,4 @@
-"""`python -m taichi_cloth studio [GARMENT.toml | PATTERN.dxf]`: serve the pattern studio's page from the current
+"""`python -m taichi_cloth studio [GARMENT.toml | PATTERN.dxf | SPECIFICATION.json]`: serve the pattern studio's page from the current
 folder (docs/studio.md). The server's packages are the `studio` extra; without them the command says so in one
 line."""
 from __future__ import annotations
@@ -9,7 +9,7 @@ import threading
 import webbrowser
 from pathlib import Path
 
-from .folder import Folder, Refused
+from .folder import OPENS, Folder, Refused
 
 DEFAULT_PORT = 8765
 EXTRA = "pip install -e '.[studio]'"
@@ -18,7 +18,8 @@ EXTRA = "pip install -e '.[studio]'"
 def add_parser(sub) -> None:
     p = sub.add_parser("studio", help="the pattern studio: a local web page to sew and place a garment's pieces, "
                        "save its garment file and drape it")
-    p.add_argument("file", nargs="?", help="a DXF pattern or a garment file (.toml) in this folder to open")
+    p.add_argument("file", nargs="?", help="a DXF pattern, a garment file (.toml) or a GarmentCode "
+                   "specification (.json) in this folder to open")
     p.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1: this machine only)")
     p.add_argument("--port", type=int, default=DEFAULT_PORT, help=f"port (default {DEFAULT_PORT})")
     p.add_argument("--no-browser", action="store_true", help="do not open a browser on the page")
@@ -44,7 +45,7 @@ def run(args) -> int:
     if args.file:
         folder = Folder(root)
         try:  # the studio reads only under its folder: the file must be in it
-            start = folder.relative(folder.resolve(args.file, (".dxf", ".toml"), must_exist=True))
+            start = folder.relative(folder.resolve(args.file, OPENS, must_exist=True))
         except Refused as exc:
             return _say(f"error: {exc}")
     with socket.socket() as probe:  # a port in use is one line, not a server's traceback

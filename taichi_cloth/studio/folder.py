@@ -11,6 +11,9 @@ from pathlib import Path, PurePosixPath
 
 from ..errors import TaichiClothError
 
+#: the files the studio opens: a DXF pattern, a garment file, a GarmentCode specification
+OPENS = (".dxf", ".toml", ".json")
+
 
 class Refused(TaichiClothError):
     """A request the studio will not carry out: `status` is the HTTP status, the message says why."""
@@ -52,7 +55,7 @@ class Folder:
         """`path` (under the folder) as the page names it: relative, with `/`."""
         return Path(path).resolve().relative_to(self.root).as_posix()
 
-    def files(self, suffixes=(".dxf", ".toml"), depth: int = 3, limit: int = 500) -> list[str]:
+    def files(self, suffixes=OPENS, depth: int = 3, limit: int = 500) -> list[str]:
         """The files under the folder with one of `suffixes`, at most `depth` folders down, hidden ones (a leading
         dot: the autosave, .venv) and what symlinks lead outside left out; sorted, at most `limit`."""
         out = []

@@ -26,6 +26,7 @@ from pathlib import Path
 
 from ..errors import PatternError
 from ..garment.dxf import dxf_units, read_dxf
+from ..garment.garmentcode import read_specification
 from ..garment.garment import RESOLUTIONS, FreePlacement
 from ..garment.garmentfile import GARMENT_SCHEMA, garment_from_dict
 from ..garment.pattern import unit_scale
@@ -34,7 +35,7 @@ from ..guards import check_memory, sheet_particles
 from ..material import MATERIALS
 from ..paths import free_path
 from ..schema import read_toml
-from .folder import Folder, Refused
+from .folder import OPENS, Folder, Refused
 from .layout import layout, segment_lengths
 from .tomlfile import garment_text
 
@@ -141,6 +142,15 @@ class Session:
                "seams": []}
         return doc if units is None else {**doc, "dxf_units": units}
 
+    def doc_from(self, path: Path, units: str | None = None) -> dict:
+        """The set-up of a file the studio opens (OPENS): a DXF pattern, a garment file or a GarmentCode
+        specification (read as the garment file taichi_cloth.garment.garmentcode makes of it: saved, it becomes
+        one)."""
+        suffix = path.suffix.lower()
+        if suffix == ".dxf":
+            return self.doc_from_dxf(path, units)
+        return read_specification(path) if suffix == ".json" else self.doc_from_toml(path)
+
     def doc_from_toml(self, path: Path) -> dict:
         """The set-up of a garment file, its `dxf` made relative to the folder (refused if it leads outside)."""
         doc = read_toml(path, str(self.folder.relative(path)), "garment", PatternError)
@@ -201,8 +211,8 @@ class Session:
         """Open a DXF pattern or a garment file under the folder (undo goes back to what was open before); `units`:
         a DXF's unit where the file gives none ("m", "cm", "mm" or "in"; None: the file's own)."""
         with self.lock:
-            path = self.folder.resolve(relative, suffixes=(".dxf", ".toml"), must_exist=True)
-            doc = self.doc_from_dxf(path, units) if path.suffix.lower() == ".dxf" else self.doc_from_toml(path)
+            path = self.folder.resolve(relative, suffixes=OPENS, must_exist=True)
+            doc = self.doc_from(path, units)
             old_target = self.target
             self.target = self.folder.relative(path) if path.suffix.lower() == ".toml" else None
             try:
@@ -221,13 +231,14 @@ class Session:
         with self.lock:
             name = Path(str(name).replace("\\", "/")).name
             suffix = Path(name).suffix.lower()
-            if suffix not in (".dxf", ".toml") or name.startswith("."):
-                raise Refused(f"{name or 'the upload'}: the studio opens .dxf and .toml files", 400)
+            if suffix not in OPENS or name.startswith("."):
+                raise Refused(f"{name or 'the upload'}: the studio opens .dxf, .toml and .json (GarmentCode) files",
+                              400)
             tmp = self.folder.root / f".studio-upload{suffix}"
             tmp.write_bytes(data)
             try:
-                doc = self.doc_from_dxf(tmp, units) if suffix == ".dxf" else self.doc_from_toml(tmp)
-                if suffix == ".dxf":
+                doc = self.doc_from(tmp, units)
+                if suffix != ".toml":
                     doc["name"] = Path(name).stem
                 self.check(doc)
             except Exception as exc:
