@@ -113,6 +113,28 @@ def test_stitches_pair_the_ends_that_meet_and_gather_up_to_the_limit(tmp_path):
         load_garment(write(tmp_path, spec))
 
 
+def test_an_unsewn_edge_shorter_than_a_quarter_spacing_is_merged_and_the_piece_meshes(tmp_path):
+    """A 1 mm edge at the front's hem corner v1 (GarmentCode outlines have sub-millimetre ones), which meshes into
+    a sliver at 2 cm: v1 is no seam's end, so the short edge is merged into the hem, which becomes a polyline from
+    v4 through v1, the piece's area kept; where both its corners are seams' ends it stays."""
+    spec = skirt()
+    front = spec["pattern"]["panels"]["front"]
+    front["vertices"].append([-WAIST - LENGTH + 0.1, 0])  # v4, on the side 1 mm before the hem corner v1
+    front["edges"][0:1] = [{"endpoints": [0, 4]}, {"endpoints": [4, 1]}]
+    spec["pattern"]["stitches"][1][0]["edge"] = 3  # the front's other side is edge 3 now
+    path = write(tmp_path, spec)
+    outline = read_specification(path)["pieces"][0]["outline"]
+    assert [c["name"] for c in outline] == ["v0", "v4", "v2", "v3"] and "polyline" in outline[1]
+    # the polyline's chords cut the hem's arc by at most 1e-4 m each: a parabolic segment of (2/3) sagitta x chord
+    whole = 0.5 * math.pi * ((WAIST + LENGTH) ** 2 - WAIST ** 2) * 1e-4  # [m^2]
+    assert 0 < whole - load_garment(path).pieces[0].area() <= 2 / 3 * 1e-4 * math.pi * (WAIST + LENGTH) * 1e-2
+    assert build_garment(load_garment(path), Body.from_mannequin()).piece_names == ["front", "back"]
+    # the hem sewn too (to the back's): v1 is a seam's end, the short edge stays
+    spec["pattern"]["stitches"].append([{"panel": "front", "edge": 2}, {"panel": "back", "edge": 2}])
+    names = [c["name"] for c in read_specification(write(tmp_path, spec))["pieces"][0]["outline"]]
+    assert names == ["v0", "v4", "v1", "v2", "v3"]
+
+
 @pytest.mark.parametrize("edit, words", [
     (lambda s: s["pattern"]["panels"]["front"]["edges"][1]["curvature"].update(type="spiral"),
      "panel 'front' edge 1: unknown curvature type 'spiral'"),

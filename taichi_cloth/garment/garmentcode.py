@@ -1,23 +1,28 @@
 """GarmentCode sewing patterns read as garments (Korosteleva and Sorkine-Hornung, "GarmentCode: Programming
 Parametric Sewing Patterns", SIGGRAPH Asia 2023; the `specification.json` its pygarment library writes).
 
-A specification holds `pattern.panels` and `pattern.stitches`, and `properties` (`units_in_meter`, 100 for cm;
-`curvature_coords`, which must be "relative"). Each panel is read as a pattern piece and a placement:
+`read_specification` turns a specification into a garment file (the dict tomllib gives for one:
+taichi_cloth.garment.garmentfile), so that load_garment, a scene, batch and the pattern studio read it as they read
+a garment file, and the studio saves it as one. The file's unit follows `properties.units_in_meter` (100: cm, 1000:
+mm, 1: m, any other converted to m); `properties.curvature_coords` must be "relative". Cotton at 2 cm.
 
-  * `vertices` (k, 2) and `edges` in loop order, each `endpoints` [i, j] and an optional `curvature`: none, a
-    straight "line"; {"type": "circle", "params": [radius, large_arc, right]} an arc from i to j of that radius,
-    the larger of the two when large_arc, bulging to the right of i -> j when right; {"type": "quadratic",
-    "params": [[t, k]]} and {"type": "cubic", "params": [[t1, k1], [t2, k2]]} Bezier curves whose control points
-    lie at start + t e + k perp(e), e = end - start, perp(e) = (-e_y, e_x) (pygarment's relative coordinates; a
-    bare [t, k] is the older quadratic form). Corner i is named "v<i>" (its vertex index).
+  * Each panel is a piece whose outline runs through its `vertices` along its `edges`, in loop order, each
+    `endpoints` [i, j] and an optional `curvature`: none, a straight line; {"type": "circle", "params": [radius,
+    large_arc, right]} an arc from i to j of that radius, the larger of the two when large_arc, bulging to the right
+    of i -> j when right (a `bulge` in the garment file); {"type": "quadratic", "params": [[t, k]]} and {"type":
+    "cubic", "params": [[t1, k1], [t2, k2]]} Bezier curves whose control points lie at start + t e + k perp(e),
+    e = end - start, perp(e) = (-e_y, e_x) (pygarment's relative coordinates; a bare [t, k] is the older quadratic
+    form; a `bspline` through them in the garment file). Corner i is named "v<i>" (its vertex index).
   * `translation` (3,) and `rotation` (Euler angles x, y, z [deg], extrinsic) place the panel flat in GarmentCode's
-    body frame: y up, the floor at 0, +z the front, +x the body's left, as the mannequin's. The panel becomes a
-    FreePlacement there: its vertex (0, 0) at the translation, u and v along the rotated x and y axes.
+    body frame: y up, the floor at 0, +z the front, +x the body's left, as the mannequin's. The piece's placement
+    is that free placement (`origin`, `u_axis`, `v_axis`): its vertex (0, 0) at the translation.
+  * A stitch [{panel, edge}, {panel, edge}] is a seam between the two edges; which ends meet is read from the
+    placed panels (the pairing whose ends lie nearer), and its length tolerance is the two edges' relative mismatch
+    plus a margin, up to GATHER_LIMIT: GarmentCode gathers a ruffle or a waist onto a shorter edge.
+  * An edge shorter than SHORT_EDGE whose corner toward a neighbour is no seam's end is merged into that neighbour
+    (the two become one polyline): GarmentCode outlines have sub-millimetre edges, which mesh into slivers.
 
-A stitch [{panel, edge}, {panel, edge}] is a seam between the two edges; which ends meet is read from the placed
-panels (the pairing whose ends lie nearer), and its length tolerance is the two edges' relative mismatch plus a
-margin, up to GATHER_LIMIT: GarmentCode gathers a ruffle or a waist onto a shorter edge. Bad input gets one
-PatternError naming the file, the panel or stitch, and the key.
+Bad input gets one PatternError naming the file, the panel or stitch, and the key.
 """
 from __future__ import annotations
 
@@ -28,14 +33,20 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import PatternError
+from .pattern import Segment
 from .seams import DEFAULT_LENGTH_TOLERANCE
 
-__all__ = ["GATHER_LIMIT", "read_specification"]
+__all__ = ["GATHER_LIMIT", "SHORT_EDGE", "read_specification"]
 
 #: the largest relative length mismatch a stitch may gather (a ruffle's edge is longer than its partner's)
 GATHER_LIMIT = 0.25
 #: the margin added to a stitch's own mismatch for its seam's tolerance (the meshed sides round differently)
 _MISMATCH_MARGIN = 0.02
+#: [m] an edge shorter than this that no stitch uses is merged into its unstitched neighbour: a quarter of the
+#: default 2 cm spacing, the finest resolution's (a 2 mm edge meshes into a sliver at 2 cm; 5 mm do not)
+SHORT_EDGE = 0.005
+#: [m] how closely a merged edge's polyline follows the curves it replaces
+_MERGE_TOLERANCE = 1e-4
 #: the garment file's unit for pygarment's units_in_meter (any other: converted to metres)
 _UNITS = {1: "m", 100: "cm", 1000: "mm"}
 
@@ -80,9 +91,54 @@ def _document(spec, path: Path) -> dict:
         pieces.append(entry)
         placed[name] = (corners3d, [metres * x for x in lengths], [c["name"] for c in entry["outline"]])
     seams = [_stitch(k, st, placed) for k, st in enumerate(_get(pattern, "stitches", list, "pattern"))]
+    sewn = {(side["piece"], side[end]) for seam in seams for side in (seam["a"], seam["b"]) for end in ("from", "to")}
+    for entry in pieces:
+        entry["outline"] = _merge_short_edges(entry["outline"], {c for p, c in sewn if p == entry["name"]},
+                                              SHORT_EDGE / metres, _MERGE_TOLERANCE / metres)
     spacing = round(0.02 / metres, 12)
     return {"name": path.parent.name if path.stem == "specification" else path.stem, "units": units,
             "material": "cotton", "spacing": spacing, "pieces": pieces, "seams": seams}
+
+
+def _edge(outline: list, k: int) -> Segment:
+    """Edge k of a garment file's outline (corner k to corner k + 1, in its units) as a Segment."""
+    corner, end = outline[k], np.asarray(outline[(k + 1) % len(outline)]["at"], dtype=np.float64)
+    start = np.asarray(corner["at"], dtype=np.float64)
+    if "bulge" in corner:
+        return Segment.arc(start, end, corner["bulge"])
+    if "bspline" in corner:
+        return Segment("bspline", np.array([start, *corner["bspline"], end]), degree=len(corner["bspline"]) + 1)
+    if "polyline" in corner:
+        return Segment("polyline", np.array([start, *corner["polyline"], end]))
+    return Segment.line(start, end)
+
+
+def _merge_short_edges(outline: list, sewn: set, shortest: float, tolerance: float) -> list:
+    """`outline` with every edge shorter than `shortest` merged into a neighbour, where the corner between them is
+    no seam's end (`sewn`: corner names): the two edges become one polyline through the corner, within
+    `tolerance` of their curves. A short edge between two sewn corners stays (meshing then names it)."""
+    outline = list(outline)
+    merged = True
+    while merged and len(outline) > 3:
+        merged = False
+        n = len(outline)
+        for k in range(n):
+            if _edge(outline, k).length() >= shortest:
+                continue
+            for drop in (k, (k + 1) % n):  # the short edge's start (merge into the edge before) or its end
+                if outline[drop]["name"] in sewn:
+                    continue
+                before = (drop - 1) % n
+                points = np.vstack([_edge(outline, before).sample(tolerance)[:-1],
+                                    _edge(outline, drop).sample(tolerance)])
+                corner = {"at": outline[before]["at"], "name": outline[before]["name"]}
+                outline[before] = {**corner, "polyline": points[1:-1].tolist()}
+                del outline[drop]
+                merged = True
+                break
+            if merged:
+                break
+    return outline
 
 
 def _get(table, key: str, kind: type, where: str):
