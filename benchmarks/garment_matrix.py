@@ -1,7 +1,8 @@
 """The garment matrix: does every shipped garment sew and come to rest on every body it is cut for, in every fabric?
 
-Runs the batch demos/batch/garment_matrix.toml (3 garments x the mannequin and four bodies in each garment's size
-range x silk, jersey, shirting, denim and wool, at 2 cm) and, with --fit, its mannequin row at 1 cm
+Runs the batch demos/batch/garment_matrix.toml (6 garments: three garment files and three GarmentCode
+specifications, x the mannequin and four bodies in each garment's size range x silk, jersey, shirting, denim and
+wool, at 2 cm) and, with --fit, its mannequin row at 1 cm
 (garment_matrix_fit.toml), then reads their results tables and writes one table: a row per garment and body, a
 column per fabric, each cell "ok" with its rest time or the job's status and reason.
 

@@ -99,12 +99,15 @@ def edge(outline, a, b):
 
 def trousers():
     """Wide-legged trousers: a front and a back panel a leg, crotch seams front and back, inseams and outseams;
-    waist 77 cm at 106-108 cm, hips 104 cm, rise 78 cm front waist to back waist, hems 43 cm round at 8 cm.
-    The panels lie 6 cm off the centre line so that the crotch extensions of the two legs do not overlap."""
+    waist 75 cm at 106-106.5 cm, hips 104 cm, rise 74.5 cm front waist to back waist (the crotch 5 cm below the
+    body's), hems 43 cm round at 8 cm. The panels lie 6 cm off the centre line so that the crotch extensions of
+    the two legs do not overlap. The crotch curves meet the inseams at right angles or less (four panels meet
+    there: more than 360 degrees of cloth round the point folds through itself), and the centre back leans out by
+    3 cm at the waist (a straight one stood off the small of the back in a fold that crossed itself)."""
     q = "quadratic"
-    front = [((6.5, 106.0), None), ((6.5, 84.0), (q, (6.0, 72.0))), ((0.5, 70.0), None), ((15.0, 8.0), None),
+    front = [((6.5, 106.0), None), ((6.5, 84.0), (q, (6.5, 72.0))), ((0.5, 72.0), None), ((15.0, 8.0), None),
              ((36.0, 8.0), None), ((32.0, 87.7), (q, (30.5, 100.0))), ((26.0, 106.0), None)]
-    back = [((8.5, 108.0), None), ((6.5, 84.0), (q, (5.5, 71.0))), ((0.5, 70.0), None), ((15.0, 8.0), None),
+    back = [((9.5, 106.5), None), ((6.5, 84.0), (q, (6.5, 72.0))), ((0.5, 72.0), None), ((15.0, 8.0), None),
             ((37.0, 8.0), None), ((33.0, 87.7), (q, (31.5, 100.0))), ((27.5, 106.0), None)]
     outlines = {"front_left": (front, 20.0), "front_right": (mirror(front), 20.0),
                 "back_left": (reverse(back), -16.0), "back_right": (mirror(reverse(back)), -16.0)}
@@ -121,11 +124,11 @@ def trousers():
         f, b = f"front_{side}", f"back_{side}"
         stitches += [[at(f, (36.0, 8.0), (32.0, 87.7)), at(b, (37.0, 8.0), (33.0, 87.7))],    # outseam, lower
                      [at(f, (32.0, 87.7), (26.0, 106.0)), at(b, (33.0, 87.7), (27.5, 106.0))],  # outseam, hip
-                     [at(f, (0.5, 70.0), (15.0, 8.0)), at(b, (0.5, 70.0), (15.0, 8.0))]]       # inseam
+                     [at(f, (0.5, 72.0), (15.0, 8.0)), at(b, (0.5, 72.0), (15.0, 8.0))]]       # inseam
     for f in ("front", "back"):
-        top = (6.5, 106.0) if f == "front" else (8.5, 108.0)
+        top = (6.5, 106.0) if f == "front" else (9.5, 106.5)
         stitches += [[at(f"{f}_left", top, (6.5, 84.0)), at(f"{f}_right", top, (6.5, 84.0))],          # centre
-                     [at(f"{f}_left", (6.5, 84.0), (0.5, 70.0)), at(f"{f}_right", (6.5, 84.0), (0.5, 70.0))]]  # crotch
+                     [at(f"{f}_left", (6.5, 84.0), (0.5, 72.0)), at(f"{f}_right", (6.5, 84.0), (0.5, 72.0))]]  # crotch
     return specification(panels, stitches)
 
 
@@ -151,7 +154,8 @@ def dress():
         def at(panel_name, a, b, o):
             return {"panel": panel_name, "edge": edge(o, (sign * a[0], a[1]), (sign * b[0], b[1]))}
 
-        stitches.append([at("front", (15.0, 141.0), (7.0, 145.0), front), at("back", (15.0, 141.0), (7.0, 145.0), back)])
+        stitches.append([at("front", (15.0, 141.0), (7.0, 145.0), front),  # the shoulder
+                         at("back", (15.0, 141.0), (7.0, 145.0), back)])
         # the side panel's u runs backward on the left, forward on the right: its edge toward the front at u < 0
         # on the left
         for main, o, u in (("front", front, -sign), ("back", back, sign)):
@@ -163,10 +167,10 @@ def dress():
 
 
 def flared_skirt():
-    """A half-circle skirt: a front and a back panel, each a quarter of an annulus (circle-arc waist and hem, the
+    """A third-circle skirt: a front and a back panel, each a sixth of an annulus (circle-arc waist and hem, the
     edges GarmentCode writes as "circle" curvature), sewn at the sides; waist 69 cm (1.5 cm of ease: a looser
-    waist creeps down the body), 45 cm long, hem 212 cm round. The sides' waist ends lie at 110.5 cm."""
-    waist, length, turn = 69.0, 45.0, math.pi / 2  # [cm], [cm], each panel's angle [rad]
+    waist creeps down the body), 45 cm long, hem 163 cm round. The sides' waist ends lie at 110.5 cm."""
+    waist, length, turn = 69.0, 45.0, math.pi / 3  # [cm], [cm], each panel's angle [rad]
     r0 = 0.5 * waist / turn
     r1 = r0 + length
     c, s = math.cos(0.5 * turn), math.sin(0.5 * turn)
