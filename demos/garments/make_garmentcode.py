@@ -5,8 +5,9 @@ SIGGRAPH Asia 2023), drawn here for the shipped mannequin, so that the GarmentCo
     python demos/garments/make_garmentcode.py    # writes trousers.json, dress.json and flared_skirt.json here
 
 Each panel is drawn in centimetres as seen from the front (x to the body's left, y up, the floor at 0) and laid
-flat in a plane in front of or behind the body (its `translation`; no rotation): front panels wind
-counter-clockwise, back panels clockwise, so that each faces out of the body. Seams join the panels' edges
+flat in a plane in front of or behind the body (its `translation`; the dress's side panels are turned by 90 degrees
+to face the body's sides): front panels wind counter-clockwise, back panels clockwise, so that each faces out of
+the body. Seams join the panels' edges
 (`stitches`); which ends meet is read from where the panels lie. Measures of the mannequin used (cm): waist
 66.9 at 108.3, hips 95.5 at 87.7, crotch at 77.2, neck base at 142.7, armpit at 126.5.
 """
