@@ -174,11 +174,10 @@ def _panel(name: str, panel, scale: float) -> tuple[dict, np.ndarray, list]:
         if ends[1] != nxt[0]:
             raise PatternError(f"{where}: edge {k} ends at vertex {ends[1]} but the next edge starts at {nxt[0]}: "
                                f"the edges must run round the panel in order")
-        corner, length = _corner(vertices[ends[0]], vertices[ends[1]], edge.get("curvature"), scale,
-                                 f"{where} edge {k}")
+        corner = _corner(vertices[ends[0]], vertices[ends[1]], edge.get("curvature"), scale, f"{where} edge {k}")
         outline.append({"name": f"v{ends[0]}", **corner})
         corners.append(vertices[ends[0]])
-        lengths.append(length)
+    lengths = [_edge(outline, k).length() for k in range(len(outline))]
     axes = _euler_xyz(rotation)
     entry = {"name": name, "outline": outline,
              "placement": {"origin": translation.tolist(), "u_axis": axes[:, 0].tolist(),
@@ -195,14 +194,14 @@ def _euler_xyz(degrees: np.ndarray) -> np.ndarray:
     return rz @ ry @ rx
 
 
-def _corner(start: np.ndarray, end: np.ndarray, curvature, scale: float, where: str) -> tuple[dict, float]:
-    """(the outline corner at `start` with its edge to `end`: {"at"} and a "bspline" or "bulge", the edge's
-    length); a circle's radius is in the file's units (x scale)."""
+def _corner(start: np.ndarray, end: np.ndarray, curvature, scale: float, where: str) -> dict:
+    """The outline corner at `start` with its edge to `end`: {"at"} and a "bspline" or "bulge"; a circle's radius
+    is in the file's units (x scale)."""
     corner = {"at": start.tolist()}
     e = end - start
     chord = float(np.linalg.norm(e))
     if curvature is None:
-        return corner, chord
+        return corner
     if isinstance(curvature, list):  # pygarment's older form: the quadratic's control point
         curvature = {"type": "quadratic", "params": [curvature]}
     if not isinstance(curvature, dict):
@@ -215,8 +214,7 @@ def _corner(start: np.ndarray, end: np.ndarray, curvature, scale: float, where: 
                 isinstance(p, list) and len(p) == 2 and all(_is_number(x) for x in p) for p in params):
             raise PatternError(f"{where}: a {kind} curvature needs {n} control point(s) [t, k], got {params!r}")
         controls = [start + float(t) * e + float(k) * perp for t, k in params]
-        points = np.array([start, *controls, end])
-        return {**corner, "bspline": [c.tolist() for c in controls]}, _bezier_length(points)
+        return {**corner, "bspline": [c.tolist() for c in controls]}
     if kind == "circle":
         if not isinstance(params, list) or len(params) != 3 or not _is_number(params[0]):
             raise PatternError(f"{where}: a circle curvature needs [radius, large_arc, right], got {params!r}")
@@ -228,21 +226,12 @@ def _corner(start: np.ndarray, end: np.ndarray, curvature, scale: float, where: 
         if large:
             sweep = 2.0 * math.pi - sweep
         # a positive bulge turns counter-clockwise: the arc lies to the right of the chord's direction
-        return {**corner, "bulge": math.tan(0.25 * sweep) * (1.0 if right else -1.0)}, radius * sweep
+        return {**corner, "bulge": math.tan(0.25 * sweep) * (1.0 if right else -1.0)}
     raise PatternError(f"{where}: unknown curvature type {kind!r} (line, circle, quadratic or cubic)")
 
 
 def _is_number(x) -> bool:
     return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
-
-
-def _bezier_length(points: np.ndarray, samples: int = 256) -> float:
-    """The length of the Bezier curve of control points (n, 2), to about 1e-5 of it (a chord sum; it only sets a
-    seam's tolerance)."""
-    t = np.linspace(0.0, 1.0, samples + 1)[:, None]
-    n = len(points) - 1
-    curve = sum(math.comb(n, i) * t ** i * (1 - t) ** (n - i) * points[i] for i in range(n + 1))
-    return float(np.linalg.norm(np.diff(curve, axis=0), axis=1).sum())
 
 
 def _stitch(k: int, stitch, placed: dict) -> dict:

@@ -1,6 +1,6 @@
-"""`python -m taichi_cloth studio [GARMENT.toml | PATTERN.dxf | SPECIFICATION.json]`: serve the pattern studio's page from the current
-folder (docs/studio.md). The server's packages are the `studio` extra; without them the command says so in one
-line."""
+"""`python -m taichi_cloth studio [GARMENT.toml | PATTERN.dxf | SPECIFICATION.json]`: serve the pattern studio's
+page from the current folder (docs/studio.md). The server's packages are the `studio` extra; without them the
+command says so in one line."""
 from __future__ import annotations
 
 import socket
